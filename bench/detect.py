@@ -1,0 +1,120 @@
+"""Detector speed in tracking (video) mode, ours vs official mediapipe 0.10.21, on the bundled Pose2Sim clip.
+
+    python bench/detect.py [--frames N] [--mediapipe-python /work/mpenv/bin/python]
+
+Ours: ``jaxmocap.detect.Detector(static_image_mode=False)`` (pose + hands, LiteRT, 2 threads). Peer: the legacy
+``mp.solutions.holistic.Holistic`` (pose + hands, face off is impossible in legacy holistic, so also
+``mp.solutions.pose`` + ``mp.solutions.hands`` run one after the other), in the mediapipe venv as a subprocess, same
+frames, same machine, same run. Prints a table and writes ``bench/results/detect.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CLIP = ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+
+PEER = r"""
+import json, sys, time, cv2, mediapipe as mp
+clip, n = sys.argv[1], int(sys.argv[2])
+cap = cv2.VideoCapture(clip); frames = []
+while len(frames) < n:
+    ok, f = cap.read()
+    if not ok: break
+    frames.append(cv2.cvtColor(f, cv2.COLOR_BGR2RGB))
+def timed(process, warm=3):
+    for f in frames[:warm]: process(f)
+    t = time.perf_counter(); found = [0, 0]
+    for f in frames:
+        b, h = process(f); found[0] += b; found[1] += h
+    return (time.perf_counter() - t) * 1000 / len(frames), found[0], found[1]
+out = {}
+with mp.solutions.holistic.Holistic(static_image_mode=False, model_complexity=1) as h:
+    def hol(f):
+        r = h.process(f)
+        return int(r.pose_landmarks is not None), (r.left_hand_landmarks is not None) + (r.right_hand_landmarks is not None)
+    out["holistic"] = timed(hol)
+with mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1) as p, \
+        mp.solutions.hands.Hands(static_image_mode=False, max_num_hands=2, model_complexity=1) as hd:
+    out["pose+hands"] = timed(lambda f: (int(p.process(f).pose_landmarks is not None), len(hd.process(f).multi_hand_landmarks or [])))
+with mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1) as p:
+    out["pose"] = timed(lambda f: (int(p.process(f).pose_landmarks is not None), 0))
+print(json.dumps({"version": mp.__version__, "results": out}))
+"""
+
+
+def read_frames(n: int):
+    import cv2
+
+    cap = cv2.VideoCapture(str(CLIP))
+    frames = []
+    while len(frames) < n:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame)
+    return frames
+
+
+def time_ours(frames, hands: bool, warm: int = 3) -> tuple[float, int, int]:
+    from jaxmocap.detect import Detector
+
+    det = Detector(static_image_mode=False, hands=hands)
+    for f in frames[:warm]:
+        det(f)
+    det.reset()
+    start = time.perf_counter()
+    bodies = hand_count = 0
+    for f in frames:
+        people = det(f)
+        bodies += bool(people)
+        hand_count += sum((p.left_hand is not None) + (p.right_hand is not None) for p in people)
+    return (time.perf_counter() - start) * 1000 / len(frames), bodies, hand_count
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=100)
+    parser.add_argument("--mediapipe-python", default="/work/mpenv/bin/python")
+    args = parser.parse_args()
+    frames = read_frames(args.frames)
+    rows = {}
+    ms, bodies, hands = time_ours(frames, hands=True)
+    rows["jaxmocap pose+hands (tracking)"] = {"ms_per_frame": ms, "frames_with_body": bodies, "hands": hands}
+    ms, bodies, _ = time_ours(frames, hands=False)
+    rows["jaxmocap pose (tracking)"] = {"ms_per_frame": ms, "frames_with_body": bodies}
+    peer = {"version": None, "results": {}}
+    if os.path.exists(args.mediapipe_python):
+        proc = subprocess.run([args.mediapipe_python, "-c", PEER, str(CLIP), str(len(frames))],
+                              capture_output=True, text=True)
+        if proc.returncode == 0:
+            peer = json.loads(proc.stdout.strip().splitlines()[-1])
+        else:
+            print("mediapipe peer failed:", proc.stderr.strip().splitlines()[-1:], file=sys.stderr)
+    for name in ("holistic", "pose+hands", "pose"):
+        value = peer["results"].get(name)
+        rows[f"mediapipe {peer['version'] or ''} {name} (video mode)".replace("  ", " ")] = (
+            {"ms_per_frame": value[0], "frames_with_body": value[1], "hands": value[2]} if value
+            else {"ms_per_frame": "n/a"})
+    print(f"{len(frames)} frames of {CLIP.name} ({frames[0].shape[1]}x{frames[0].shape[0]}), "
+          f"{os.cpu_count()} CPUs, {platform.processor() or platform.machine()}")
+    print(f"{'pipeline':<48}{'ms/frame':>10}{'body found':>12}{'hands found':>13}")
+    for name, row in rows.items():
+        ms = row["ms_per_frame"]
+        print(f"{name:<48}{(f'{ms:.1f}' if isinstance(ms, float) else ms):>10}{row.get('frames_with_body', ''):>12}{row.get('hands', ''):>13}")
+    out = ROOT / "bench" / "results" / "detect.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"clip": CLIP.name, "frames": len(frames), "cpus": os.cpu_count(), "rows": rows},
+                              indent=1))
+
+
+if __name__ == "__main__":
+    main()

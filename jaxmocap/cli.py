@@ -1,0 +1,84 @@
+"""The ``jaxmocap`` command line."""
+
+import argparse
+import sys
+from pathlib import Path
+
+from jaxmocap.errors import InputError
+
+
+def _cmd_model(args):
+    from smplx_jax.default_model import write_default_model
+
+    write_default_model(args.out)
+    print(f"wrote the default body model to {args.out}")
+
+
+def _cmd_demo(args):
+    from jaxmocap.demo import body_model_demo
+
+    for path in body_model_demo(args.out):
+        print(f"wrote {path}")
+
+
+def _cmd_detect(args):
+    from jaxmocap.detect import detect_media
+
+    written = detect_media(args.input, args.out, overlay=args.overlay, progress=not args.quiet,
+                           max_people=args.max_people, model_dir=args.models, hands=not args.no_hands)
+    print(f"wrote {len(written)} OpenPose JSON file(s) to {args.out}")
+
+
+def _cmd_bench(args):
+    from jaxmocap.benchmarks import run_benchmarks
+
+    run_benchmarks(args.only, args.out, quick=args.quick)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="jaxmocap", description=__doc__)
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    p = commands.add_parser("demo", help="the body model, posed and rendered (the video demo comes with the pipeline)")
+    p.add_argument("--out", type=Path, default=Path("jaxmocap_demo"), help="output folder (default: %(default)s)")
+    p.set_defaults(run=_cmd_demo)
+
+    p = commands.add_parser("detect", help="2D keypoints (BODY_25 + hands) as OpenPose JSON, one file per frame")
+    p.add_argument("input", type=Path, help="video file, image folder or single image")
+    p.add_argument("--out", type=Path, required=True, help="output folder for the JSON files")
+    p.add_argument("--overlay", action="store_true", help="also draw the skeletons (images or a video)")
+    p.add_argument("--max-people", type=int, default=1, help="people per frame (default: %(default)s)")
+    p.add_argument("--no-hands", action="store_true", help="body keypoints only")
+    p.add_argument("--models", type=Path, default=None, help="folder holding the four mediapipe .tflite files")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=_cmd_detect)
+
+    p = commands.add_parser("model", help="write the license-free default body model as an SMPL-X .npz")
+    p.add_argument("--out", type=Path, required=True, help="file to write, e.g. models/smplx/SMPLX_NEUTRAL.npz")
+    p.set_defaults(run=_cmd_model)
+
+    p = commands.add_parser("bench", help="the benchmark suite, side by side with peers (needs a source checkout)")
+    p.add_argument("--only", nargs="*", default=None, help="benchmark names, e.g. body_model")
+    p.add_argument("--out", type=Path, default=Path("bench/results"), help="folder for JSON results")
+    p.add_argument("--quick", action="store_true", help="fewer repetitions")
+    p.set_defaults(run=_cmd_bench)
+    return parser
+
+
+def main(argv=None) -> int:
+    from smplx_jax import ModelFileError
+
+    args = _parser().parse_args(argv)
+    try:
+        args.run(args)
+    except (InputError, ModelFileError, OSError) as err:
+        print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"jaxmocap {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

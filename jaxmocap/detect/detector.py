@@ -1,0 +1,239 @@
+"""Whole-body detection of people in one image or a video stream: pose, then hands attached to each body."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
+from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, pose_hand_roi
+from .models import ensure_models
+from .pose import PoseEstimator, PoseResult, landmark_box, rect_iou
+
+SIDES = ("left", "right")
+
+
+@dataclass(frozen=True)
+class Person:
+    """One person in one image; pixel coordinates (x right, y down), z in the same pixel scale as x.
+
+    ``body`` (33, 4) BlazePose landmarks x, y, z, visibility; ``body_world`` (33, 3) metres about the hips;
+    ``left_hand`` / ``right_hand`` (21, 3) x, y, z in OpenPose hand order, or None when not found, with
+    ``*_hand_world`` (21, 3) metres and ``*_hand_score`` the hand presence (0 when missing); ``box`` the body's
+    pixel box (x0, y0, x1, y1) from its landmarks; ``*_hand_box`` the hand's, or None; ``score`` the pose presence.
+    """
+
+    body: np.ndarray
+    body_world: np.ndarray
+    left_hand: np.ndarray | None
+    right_hand: np.ndarray | None
+    left_hand_world: np.ndarray | None
+    right_hand_world: np.ndarray | None
+    left_hand_score: float
+    right_hand_score: float
+    box: np.ndarray
+    left_hand_box: np.ndarray | None
+    right_hand_box: np.ndarray | None
+    score: float
+
+
+def as_bgr(image: np.ndarray) -> np.ndarray:
+    """A contiguous uint8 BGR image from a grayscale, BGR or BGRA array (8- or 16-bit)."""
+    image = np.asarray(image)
+    if image.dtype == np.uint16:
+        image = (image >> 8).astype(np.uint8)
+    elif image.dtype != np.uint8:
+        raise ValueError(f"image must be uint8 (or uint16), got {image.dtype}")
+    if image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 1):
+        image = cv2.cvtColor(image.reshape(image.shape[:2]), cv2.COLOR_GRAY2BGR)
+    elif image.ndim == 3 and image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+    elif not (image.ndim == 3 and image.shape[2] == 3):
+        raise ValueError(f"image must be (H, W), (H, W, 1), (H, W, 3) or (H, W, 4), got shape {image.shape}")
+    if image.shape[0] < 2 or image.shape[1] < 2:
+        raise ValueError(f"image is too small: {image.shape[1]}x{image.shape[0]}")
+    return np.ascontiguousarray(image)
+
+
+@dataclass
+class _Track:
+    pose: PoseResult
+    hands: dict  # side -> HandResult | None
+    wait: dict = None  # side -> frames to wait before seeding a lost hand from the body again
+
+    def __post_init__(self):
+        self.wait = self.wait or {s: 0 for s in SIDES}
+
+
+class Detector:
+    """BlazePose + hand landmarks for up to ``max_people`` people.
+
+    ``static_image_mode=True`` treats every call as an unrelated image (person and palm detectors each time);
+    ``False`` tracks: the next ROIs come from the previous frame's landmarks, the person detector runs only when
+    a track is lost (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked), and a lost
+    hand is searched for (every ``hand_retry_every`` frames) in the ROI given by the body's wrist, pinky and index,
+    as mediapipe's holistic does.
+    Model files: see ``jaxmocap.detect.models`` (``model_dir`` or ``$JAXMOCAP_MEDIAPIPE_DIR`` to use a copy).
+    """
+
+    def __init__(self, static_image_mode: bool = True, max_people: int = 1, hands: bool = True,
+                 model_dir=None, num_threads: int = 2, min_detection_confidence: float = 0.5,
+                 min_tracking_confidence: float = 0.5, redetect_every: int = 15, hand_retry_every: int = 2):
+        if max_people < 1:
+            raise ValueError(f"max_people must be >= 1, got {max_people}")
+        paths = ensure_models(model_dir)
+        self.static_image_mode = static_image_mode
+        self.max_people = max_people
+        self.with_hands = hands
+        self.min_detection_confidence = min_detection_confidence
+        self.min_tracking_confidence = min_tracking_confidence
+        self.redetect_every = redetect_every
+        self.hand_retry_every = max(1, hand_retry_every)
+        self._pose = PoseEstimator(paths["pose_detection.tflite"], paths["pose_landmark_full.tflite"], num_threads)
+        self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
+                                    num_threads)
+        self._tracks: list[_Track] = []
+        self._frame = 0
+
+    def reset(self) -> None:
+        """Forget the tracked people (start of a new video)."""
+        self._tracks = []
+        self._frame = 0
+
+    # -- body -------------------------------------------------------------------------------------------------
+    def _detect_people(self, image: np.ndarray, known: list[PoseResult]) -> list[PoseResult]:
+        size = (image.shape[1], image.shape[0])
+        found = list(known)
+        for det in self._pose.detect(image, self.min_detection_confidence):
+            if len(found) >= self.max_people:
+                break
+            roi = self._pose.detection_roi(det, size)
+            if any(rect_iou(roi, p.roi) > 0.5 or rect_iou(roi, p.next_roi) > 0.5 for p in found):
+                continue
+            result = self._pose.landmarks(image, roi, self.min_tracking_confidence)
+            if result is not None and not any(rect_iou(result.next_roi, p.next_roi) > 0.5 for p in found):
+                found.append(result)
+        return found[len(known):]
+
+    def _people(self, image: np.ndarray) -> list[_Track]:
+        if self.static_image_mode:
+            return [_Track(p, {s: None for s in SIDES}) for p in self._detect_people(image, [])]
+        tracks = []
+        for track in self._tracks:
+            result = self._pose.landmarks(image, track.pose.next_roi, self.min_tracking_confidence)
+            if result is None or any(rect_iou(result.next_roi, t.pose.next_roi) > 0.5 for t in tracks):
+                continue
+            tracks.append(_Track(result, track.hands, track.wait))
+        if not tracks or (len(tracks) < self.max_people and self._frame % self.redetect_every == 0):
+            new = self._detect_people(image, [t.pose for t in tracks])
+            tracks += [_Track(p, {s: None for s in SIDES}) for p in new]
+        return tracks
+
+    # -- hands ------------------------------------------------------------------------------------------------
+    def _seed_hand(self, image: np.ndarray, pose: PoseResult, side: str, refine: bool) -> HandResult | None:
+        wrist = POSE_HAND_POINTS[side][0]
+        if pose.landmarks[wrist, 3] < 0.1:  # holistic's wrist-visibility gate
+            return None
+        size = (image.shape[1], image.shape[0])
+        hand = self._hands.landmarks(image, pose_hand_roi(pose.landmarks, side, size), MIN_HAND_PRESENCE)
+        if hand is not None and refine:
+            hand = self._hands.landmarks(image, hand.next_roi, MIN_HAND_PRESENCE) or hand
+        if hand is None or not self._plausible(hand, pose, side, size):
+            return None
+        return hand
+
+    @staticmethod
+    def _wrist_cost(hand: HandResult, pose: PoseResult, side: str, size) -> float:
+        """Distance hand wrist -> body wrist in palm lengths, plus a handedness penalty (tie-breaker)."""
+        w, h = size
+        wrist = pose.landmarks[POSE_HAND_POINTS[side][0], :2] * (w, h)
+        hand_wrist = hand.landmarks[0, :2] * (w, h)
+        palm = max(np.linalg.norm((hand.landmarks[9, :2] - hand.landmarks[0, :2]) * (w, h)), 1.0)
+        p_side = hand.right_score if side == "right" else 1.0 - hand.right_score
+        return float(np.linalg.norm(hand_wrist - wrist) / palm + 0.25 * (1.0 - p_side))
+
+    def _plausible(self, hand: HandResult, pose: PoseResult, side: str, size) -> bool:
+        return self._wrist_cost(hand, pose, side, size) < 2.0
+
+    def _assign_palms(self, image: np.ndarray, tracks: list[_Track]) -> None:
+        size = (image.shape[1], image.shape[0])
+        palms = self._hands.detect(image)[: 2 * len(tracks)]
+        hands = [self._hands.landmarks(image, self._hands.detection_roi(d, size), self.min_tracking_confidence)
+                 for d in palms]
+        hands = [h for h in hands if h is not None]
+        pairs = sorted((self._wrist_cost(h, t.pose, s, size), i, k, s)
+                       for i, h in enumerate(hands) for k, t in enumerate(tracks) for s in SIDES)
+        used = set()
+        for cost, i, k, side in pairs:
+            if cost >= 2.0 or i in used or tracks[k].hands[side] is not None:
+                continue
+            tracks[k].hands[side] = hands[i]
+            used.add(i)
+
+    def _update_hands(self, image: np.ndarray, tracks: list[_Track]) -> None:
+        size = (image.shape[1], image.shape[0])
+        if self.static_image_mode:
+            self._assign_palms(image, tracks)
+            for t in tracks:
+                for side in SIDES:
+                    if t.hands[side] is None:
+                        t.hands[side] = self._seed_hand(image, t.pose, side, refine=True)
+            return
+        for t in tracks:
+            for side in SIDES:
+                prev = t.hands[side]
+                hand = None
+                if prev is not None:
+                    hand = self._hands.landmarks(image, prev.next_roi, self.min_tracking_confidence)
+                    if hand is not None and not self._plausible(hand, t.pose, side, size):
+                        hand = None
+                if hand is None and t.wait[side] <= 0:
+                    hand = self._seed_hand(image, t.pose, side, refine=False)
+                    t.wait[side] = 0 if hand is not None else self.hand_retry_every - 1
+                elif hand is None:
+                    t.wait[side] -= 1
+                t.hands[side] = hand
+
+    # -- public -----------------------------------------------------------------------------------------------
+    def __call__(self, image_bgr: np.ndarray) -> list[Person]:
+        """People in one BGR (or grayscale / BGRA) image; in tracking mode, the next frame of the stream."""
+        image = as_bgr(image_bgr)
+        tracks = self._people(image)
+        if self.with_hands and tracks:
+            if self.static_image_mode:
+                for t in tracks:
+                    t.hands = {s: None for s in SIDES}
+            self._update_hands(image, tracks)
+        else:
+            for t in tracks:
+                t.hands = {s: None for s in SIDES}
+        if not self.static_image_mode:
+            self._tracks = tracks
+            self._frame += 1
+        size = (image.shape[1], image.shape[0])
+        return [_person(t, size) for t in tracks]
+
+
+def _person(track: _Track, size: tuple[int, int]) -> Person:
+    w, h = size
+    scale = np.array([w, h, w])
+    body = np.concatenate([track.pose.landmarks[:, :3] * scale, track.pose.landmarks[:, 3:4]], axis=1)
+    parts = {}
+    for side in SIDES:
+        hand = track.hands.get(side)
+        if hand is None:
+            parts[side] = (None, None, 0.0, None)
+        else:
+            px = hand.landmarks * scale
+            box = np.array([px[:, 0].min(), px[:, 1].min(), px[:, 0].max(), px[:, 1].max()])
+            parts[side] = (px, hand.world, hand.presence, box)
+    return Person(
+        body=body, body_world=track.pose.world,
+        left_hand=parts["left"][0], right_hand=parts["right"][0],
+        left_hand_world=parts["left"][1], right_hand_world=parts["right"][1],
+        left_hand_score=parts["left"][2], right_hand_score=parts["right"][2],
+        box=landmark_box(track.pose.landmarks, size), left_hand_box=parts["left"][3],
+        right_hand_box=parts["right"][3], score=track.pose.presence)
+

@@ -1,0 +1,106 @@
+"""Hand landmarks as mediapipe 0.10.21's ``HandLandmarkTrackingCpu`` runs them, plus pose-seeded hand ROIs.
+
+Palm detector (``PalmDetectionCpu``): whole image letterboxed to 192, values in [0, 1], zero border; SSD anchors
+(4 layers, strides 8/16/16/16), 7 keypoints; ROI (``PalmDetectionDetectionToRoi``): box rotated by keypoint 0 -> 2,
+shift -0.5 along y, ×2.6, square long. Landmarks (``HandLandmarkCpu``): ROI warped to 224, values in [0, 1],
+replicated border; 21 × (x, y, z) with z / 0.4, presence ≥ 0.5, handedness, world landmarks. Tracking
+(``HandLandmarkLandmarksToRoi``): landmarks 0,1,2,3,5,6,9,10,13,14,17,18 give a rotated box, shift -0.1, ×2.0.
+Pose seeding (as holistic does, without its recrop model): wrist, pinky and index of the body give the ROI.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .models import TFLiteModel
+from .roi import Rect, box_rect, crop, project, rotate_world, rotation_between, transform_rect
+from .ssd import Detection, decode, remove_letterbox, ssd_anchor_centers, weighted_nms
+
+PALM_SIZE = 192
+LANDMARK_SIZE = 224
+MIN_PALM_SCORE = 0.5
+MIN_PRESENCE = 0.5
+_PARTIAL = [0, 1, 2, 3, 5, 6, 9, 10, 13, 14, 17, 18]
+# BlazePose indices of (wrist, pinky, index) per side
+POSE_HAND_POINTS = {"left": (15, 17, 19), "right": (16, 18, 20)}
+
+
+class HandResult(NamedTuple):
+    """One hand: ``landmarks`` (21, 3) normalized x, y, z; ``world`` (21, 3) metres; ``presence``; ``right_score``:
+    probability that it is the person's right hand (mediapipe's mirrored "Left" score); ``roi``; ``next_roi``."""
+
+    landmarks: np.ndarray
+    world: np.ndarray
+    presence: float
+    right_score: float
+    roi: Rect
+    next_roi: Rect
+
+
+def landmarks_roi(landmarks: np.ndarray, image_size: tuple[int, int]) -> Rect:
+    """Tracking ROI from 21 normalized hand landmarks (``HandLandmarksToRectCalculator`` + transformation)."""
+    w, h = image_size
+    pts = landmarks[_PARTIAL, :2]
+    mid = ((pts[4] + pts[8]) / 2 + pts[6]) / 2  # mean of index/ring MCP, averaged with middle MCP
+    rot = rotation_between(pts[0], mid, image_size)
+    center = (pts.min(0) + pts.max(0)) / 2
+    px = (pts - center) * (w, h)
+    c, s = math.cos(-rot), math.sin(-rot)
+    proj = np.stack([px[:, 0] * c - px[:, 1] * s, px[:, 0] * s + px[:, 1] * c], axis=1)
+    pc = (proj.min(0) + proj.max(0)) / 2
+    size = proj.max(0) - proj.min(0)
+    cx = pc[0] * math.cos(rot) - pc[1] * math.sin(rot) + w * center[0]
+    cy = pc[0] * math.sin(rot) + pc[1] * math.cos(rot) + h * center[1]
+    rect = Rect(cx / w, cy / h, size[0] / w, size[1] / h, rot)
+    return transform_rect(rect, image_size, 2.0, shift_y=-0.1)
+
+
+def pose_hand_roi(body: np.ndarray, side: str, image_size: tuple[int, int], scale: float = 2.7) -> Rect:
+    """Hand ROI from the body's wrist, pinky and index landmarks (normalized), as holistic's
+    ``HandDetectionsFromPoseToRectsCalculator`` builds it before its recrop model."""
+    w, h = image_size
+    wrist, pinky, index = (body[i, :2] for i in POSE_HAND_POINTS[side])
+    middle = (2 * index + pinky) / 3
+    size = 2 * math.hypot((middle[0] - wrist[0]) * w, (middle[1] - wrist[1]) * h)
+    rect = Rect(float(middle[0]), float(middle[1]), size / w, size / h, rotation_between(wrist, middle, image_size))
+    return transform_rect(rect, image_size, scale, shift_y=-0.1)
+
+
+class HandEstimator:
+    """Palm detector + hand landmark model."""
+
+    def __init__(self, palm_path, landmark_path, num_threads: int = 2):
+        self._palm = TFLiteModel(palm_path, num_threads)
+        self._landmarker = TFLiteModel(landmark_path, num_threads)
+        self._anchors = ssd_anchor_centers(PALM_SIZE, [8, 16, 16, 16])
+
+    def detect(self, image: np.ndarray, min_score: float = MIN_PALM_SCORE) -> list[Detection]:
+        """Palm detections on a BGR image, best first, normalized to the image."""
+        tensor, padding = crop(image, None, PALM_SIZE, (0.0, 1.0), border_zero=True)
+        raw_boxes, raw_scores = self._palm(tensor)
+        dets = decode(raw_boxes[0], raw_scores[0], self._anchors, PALM_SIZE, 7, min_score)
+        return [remove_letterbox(d, padding) for d in weighted_nms(dets, 0.3)]
+
+    @staticmethod
+    def detection_roi(det: Detection, image_size: tuple[int, int]) -> Rect:
+        """Hand ROI of a palm detection."""
+        rect = box_rect(det.box, det.keypoints[0], det.keypoints[2], image_size)
+        return transform_rect(rect, image_size, 2.6, shift_y=-0.5)
+
+    def landmarks(self, image: np.ndarray, roi: Rect, min_presence: float = MIN_PRESENCE) -> HandResult | None:
+        """The hand inside ``roi`` of a BGR image, or None when the model finds none."""
+        ih, iw = image.shape[:2]
+        tensor, padding = crop(image, roi, LANDMARK_SIZE, (0.0, 1.0), border_zero=False)
+        raw, flag, handedness, raw_world = self._landmarker(tensor)
+        presence = float(flag.reshape(-1)[0])
+        if presence < min_presence:
+            return None
+        lm = raw.reshape(21, 3).astype(np.float64) / LANDMARK_SIZE
+        lm[:, 2] /= 0.4
+        image_lm = project(lm, roi, padding)
+        world = rotate_world(raw_world.reshape(21, 3).astype(np.float64), roi)
+        return HandResult(image_lm, world, presence, float(handedness.reshape(-1)[0]), roi,
+                          landmarks_roi(image_lm, (iw, ih)))

@@ -1,0 +1,105 @@
+"""OpenPose keypoints: BODY_25 + two 21-point hands from mediapipe landmarks, and OpenPose JSON files.
+
+Layout of the (67, 3) array per person: BODY_25 (0-24), left hand (25-45), right hand (46-66), each row x, y in
+pixels and a confidence; a missing point is (0, 0, 0). mediapipe's 21 hand landmarks are already in OpenPose's
+hand order.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+NUM_KEYPOINTS = 67
+BODY_SLICE, LEFT_HAND_SLICE, RIGHT_HAND_SLICE = slice(0, 25), slice(25, 46), slice(46, 67)
+
+# BODY_25 index -> BlazePose landmark(s); a pair is averaged (neck, mid-hip); None = not available (small toes).
+BODY25_FROM_BLAZEPOSE: list[tuple[int, ...] | None] = [
+    (0,), (11, 12), (12,), (14,), (16,), (11,), (13,), (15,), (23, 24), (24,), (26,), (28,), (23,), (25,), (27,),
+    (5,), (2,), (8,), (7,), (31,), None, (29,), (32,), None, (30,),
+]
+
+
+def body25_from_blazepose(body: np.ndarray) -> np.ndarray:
+    """(25, 3) BODY_25 from (33, >=4) BlazePose landmarks in pixels (x, y, z, visibility); confidence = visibility
+    (the smaller of the two for neck and mid-hip)."""
+    out = np.zeros((25, 3))
+    for j, src in enumerate(BODY25_FROM_BLAZEPOSE):
+        if src is None:
+            continue
+        pts = body[list(src)]
+        out[j, :2] = pts[:, :2].mean(0)
+        out[j, 2] = pts[:, 3].min()
+    return out
+
+
+def hand21(hand: np.ndarray | None, confidence: float) -> np.ndarray:
+    """(21, 3) OpenPose hand from (21, >=2) pixel landmarks (zeros when the hand is missing)."""
+    out = np.zeros((21, 3))
+    if hand is not None:
+        out[:, :2] = hand[:, :2]
+        out[:, 2] = confidence
+    return out
+
+
+def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray) -> Path:
+    """Write (P, 67, 3) keypoints as one OpenPose 1.3 JSON file, atomically. Returns the path."""
+    keypoints = np.asarray(keypoints, dtype=np.float64)
+    if keypoints.ndim != 3 or keypoints.shape[1:] != (NUM_KEYPOINTS, 3):
+        raise ValueError(f"keypoints must have shape (num_people, 67, 3), got {keypoints.shape}")
+    flat = lambda a: [round(float(v), 3) for v in a.reshape(-1)]  # noqa: E731
+    people = [{
+        "pose_keypoints_2d": flat(p[BODY_SLICE]),
+        "hand_left_keypoints_2d": flat(p[LEFT_HAND_SLICE]),
+        "hand_right_keypoints_2d": flat(p[RIGHT_HAND_SLICE]),
+        "face_keypoints_2d": [],
+    } for p in keypoints]
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".part", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump({"version": 1.3, "people": people}, f, separators=(",", ":"))
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def _part(person: dict, key: str, count: int, path) -> np.ndarray:
+    values = person.get(key) or []
+    if len(values) == 0:
+        return np.zeros((count, 3))
+    if len(values) != count * 3:
+        raise ValueError(f"{path}: '{key}' has {len(values)} values, expected {count * 3} "
+                         f"({'BODY_25' if count == 25 else 'a 21-point hand'})")
+    return np.asarray(values, dtype=np.float64).reshape(count, 3)
+
+
+def read_openpose_json(path: str | os.PathLike) -> np.ndarray:
+    """(P, 67, 3) keypoints from an OpenPose JSON file (BODY_25, left hand, right hand; missing parts are zeros).
+
+    Accepts what OpenPose writes: extra keys (``person_id``, ``*_3d``, face), empty ``people``, absent hands.
+    """
+    try:
+        with open(path) as f:
+            data = json.load(f)
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"cannot read OpenPose JSON {path}: {e}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("people", []), list):
+        raise ValueError(f"{path}: not an OpenPose keypoint file (no 'people' list)")
+    out = np.zeros((len(data.get("people", [])), NUM_KEYPOINTS, 3))
+    for i, person in enumerate(data.get("people", [])):
+        out[i, BODY_SLICE] = _part(person, "pose_keypoints_2d", 25, path)
+        out[i, LEFT_HAND_SLICE] = _part(person, "hand_left_keypoints_2d", 21, path)
+        out[i, RIGHT_HAND_SLICE] = _part(person, "hand_right_keypoints_2d", 21, path)
+    return out
+
+
+def json_name(stem: str, frame: int | None) -> str:
+    """``<stem>_<frame:012d>_keypoints.json`` for a video frame, ``<stem>_keypoints.json`` for an image."""
+    return f"{stem}_keypoints.json" if frame is None else f"{stem}_{frame:012d}_keypoints.json"

@@ -1,0 +1,124 @@
+"""Rotated regions of interest: building them, cropping them into a model tensor, projecting landmarks back.
+
+Follows mediapipe's ``AlignmentPointsRectsCalculator``, ``DetectionsToRectsCalculator``,
+``RectTransformationCalculator``, ``ImageToTensorCalculator`` (OpenCV path), ``LandmarkLetterboxRemovalCalculator``,
+``LandmarkProjectionCalculator`` and ``WorldLandmarkProjectionCalculator``. A rect is normalized to the image
+(centre, size as fractions of width/height) with a rotation in radians (clockwise in image coordinates).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+
+class Rect(NamedTuple):
+    """A rotated rectangle normalized to the image, like mediapipe's ``NormalizedRect``."""
+
+    x_center: float
+    y_center: float
+    width: float
+    height: float
+    rotation: float = 0.0
+
+
+def normalize_radians(angle: float) -> float:
+    return angle - 2 * math.pi * math.floor((angle + math.pi) / (2 * math.pi))
+
+
+def rotation_between(p0, p1, image_size: tuple[int, int], target_degrees: float = 90.0) -> float:
+    """Rotation that turns the vector p0 -> p1 (normalized points) to ``target_degrees`` (90 = pointing up)."""
+    w, h = image_size
+    dx, dy = (p1[0] - p0[0]) * w, (p1[1] - p0[1]) * h
+    return normalize_radians(math.radians(target_degrees) - math.atan2(-dy, dx))
+
+
+def alignment_rect(center, scale_point, image_size: tuple[int, int], target_degrees: float = 90.0) -> Rect:
+    """Square rect centred on ``center`` whose side is twice the distance to ``scale_point`` (in pixels)."""
+    w, h = image_size
+    size = 2.0 * math.hypot((scale_point[0] - center[0]) * w, (scale_point[1] - center[1]) * h)
+    return Rect(float(center[0]), float(center[1]), size / w, size / h,
+                rotation_between(center, scale_point, image_size, target_degrees))
+
+
+def box_rect(box, p0, p1, image_size: tuple[int, int], target_degrees: float = 90.0) -> Rect:
+    """Axis-aligned box (xmin, ymin, xmax, ymax) as a rect rotated by the keypoint vector p0 -> p1."""
+    return Rect((box[0] + box[2]) / 2, (box[1] + box[3]) / 2, box[2] - box[0], box[3] - box[1],
+                rotation_between(p0, p1, image_size, target_degrees))
+
+
+def transform_rect(rect: Rect, image_size: tuple[int, int], scale: float, shift_y: float = 0.0) -> Rect:
+    """``RectTransformationCalculator`` with ``square_long``: shift along the rotated y axis, square, then scale."""
+    w, h = image_size
+    xc, yc, rw, rh, rot = rect
+    if shift_y:
+        if rot == 0.0:
+            yc += rh * shift_y
+        else:
+            xc += (-h * rh * shift_y * math.sin(rot)) / w
+            yc += (h * rh * shift_y * math.cos(rot)) / h
+    long_side = max(rw * w, rh * h)
+    return Rect(xc, yc, long_side / w * scale, long_side / h * scale, rot)
+
+
+def crop(image: np.ndarray, rect: Rect | None, size: int, value_range: tuple[float, float],
+         border_zero: bool) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The (1, size, size, 3) float32 RGB tensor of ``rect`` in a BGR ``image`` (whole image if None), letterboxed.
+
+    Returns the tensor and the letterbox padding (left, top, right, bottom) as fractions of the tensor.
+    """
+    ih, iw = image.shape[:2]
+    if rect is None:
+        cx, cy, rw, rh, rot = iw / 2, ih / 2, float(iw), float(ih), 0.0
+    else:
+        cx, cy, rw, rh, rot = rect.x_center * iw, rect.y_center * ih, rect.width * iw, rect.height * ih, rect.rotation
+    if not (rw > 0 and rh > 0) or not all(math.isfinite(v) for v in (cx, cy, rw, rh, rot)):
+        raise ValueError(f"invalid region of interest {rect}")
+    pad_x = pad_y = 0.0
+    if rh / rw < 1.0:  # square tensor: grow the short side, record the letterbox
+        pad_y = (1.0 - rh / rw) / 2
+        rh = rw
+    else:
+        pad_x = (1.0 - rw / rh) / 2
+        rw = rh
+    src = cv2.boxPoints(((cx, cy), (rw, rh), math.degrees(rot)))
+    dst = np.array([[0, size], [0, 0], [size, 0], [size, size]], np.float32)
+    matrix = cv2.getPerspectiveTransform(src.astype(np.float32), dst)
+    border = cv2.BORDER_CONSTANT if border_zero else cv2.BORDER_REPLICATE
+    warped = cv2.warpPerspective(image, matrix, (size, size), flags=cv2.INTER_LINEAR, borderMode=border)
+    lo, hi = value_range
+    tensor = warped[None, :, :, ::-1].astype(np.float32) * np.float32((hi - lo) / 255.0) + np.float32(lo)
+    return tensor, (pad_x, pad_y, pad_x, pad_y)
+
+
+def project(points: np.ndarray, rect: Rect, padding) -> np.ndarray:
+    """Landmarks (N, >=3) normalized to the letterboxed crop -> normalized to the image (x, y, z; z scaled as x)."""
+    left, top, right, bottom = padding
+    x = (points[:, 0] - left) / (1.0 - left - right) - 0.5
+    y = (points[:, 1] - top) / (1.0 - top - bottom) - 0.5
+    z = points[:, 2] / (1.0 - left - right)
+    c, s = math.cos(rect.rotation), math.sin(rect.rotation)
+    out = np.array(points, dtype=np.float64, copy=True)
+    out[:, 0] = (c * x - s * y) * rect.width + rect.x_center
+    out[:, 1] = (s * x + c * y) * rect.height + rect.y_center
+    out[:, 2] = z * rect.width
+    return out
+
+
+def rotate_world(points: np.ndarray, rect: Rect) -> np.ndarray:
+    """World landmarks (N, 3) rotated about z by the rect's rotation, like ``WorldLandmarkProjectionCalculator``."""
+    c, s = math.cos(rect.rotation), math.sin(rect.rotation)
+    out = np.array(points, dtype=np.float64, copy=True)
+    out[:, 0] = c * points[:, 0] - s * points[:, 1]
+    out[:, 1] = s * points[:, 0] + c * points[:, 1]
+    return out
+
+
+def rect_corners(rect: Rect, image_size: tuple[int, int]) -> np.ndarray:
+    """The rect's 4 corners in pixels (for drawing and overlap tests)."""
+    w, h = image_size
+    return cv2.boxPoints(((rect.x_center * w, rect.y_center * h), (rect.width * w, rect.height * h),
+                          math.degrees(rect.rotation)))

@@ -1,0 +1,129 @@
+"""Forward passes of one body: the whole mesh (`forward`) and the joints alone (`forward_joints`).
+
+The computation is the ``smplx`` package's: shape blend shapes, joints regressed from the shaped mesh
+(precomputed as joint templates plus joint shape directions), pose blend shapes, a rigid kinematic chain and
+linear blend skinning; then vertex joints and face landmarks, and ``transl`` last. Batch with ``jax.vmap``.
+"""
+
+import functools
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from smplx_jax.model import BodyModel
+from smplx_jax.params import SMPLXParams
+from smplx_jax.rotations import rotvec_to_rotmat
+
+
+class Output(NamedTuple):
+    vertices: Float[Array, "V 3"]
+    joints: Float[Array, "127 3"]
+
+
+class Skeleton(NamedTuple):
+    """The posed skeleton: global rotation and position of every joint (``transl`` included)."""
+
+    glob_rotmats: Float[Array, "55 3 3"]
+    joints: Float[Array, "55 3"]
+
+
+# 3x3 products written out by component: XLA fuses these into a few loops, far faster on CPU than a
+# broadcast-and-reduce or a batched dot of tiny matrices.
+def _matmul3(a, b):
+    return jnp.stack([
+        jnp.stack([a[..., i, 0] * b[..., 0, k] + a[..., i, 1] * b[..., 1, k] + a[..., i, 2] * b[..., 2, k]
+                   for k in range(3)], axis=-1)
+        for i in range(3)], axis=-2)
+
+
+def _matvec3(a, v):
+    return jnp.stack([a[..., i, 0] * v[..., 0] + a[..., i, 1] * v[..., 1] + a[..., i, 2] * v[..., 2]
+                      for i in range(3)], axis=-1)
+
+
+@functools.lru_cache(maxsize=None)
+def _levels(parents: tuple[int, ...]) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
+    """Joints grouped by depth in the tree (root excluded), each group with its parents."""
+    depth = [0] * len(parents)
+    for j in range(1, len(parents)):
+        depth[j] = depth[parents[j]] + 1
+    groups = []
+    for d in range(1, max(depth) + 1):
+        joints = tuple(j for j in range(len(parents)) if depth[j] == d)
+        groups.append((joints, tuple(parents[j] for j in joints)))
+    return tuple(groups)
+
+
+def kinematic_chain(rel_rotmats: Float[Array, "J 3 3"], rest_joints: Float[Array, "J 3"], parents: tuple[int, ...]):
+    """Global rotations and positions of the joints, ``G_i = G_parent [R_i | J_i - J_parent]``."""
+    glob_rotmats = jnp.zeros_like(rel_rotmats).at[0].set(rel_rotmats[0])
+    positions = jnp.zeros_like(rest_joints).at[0].set(rest_joints[0])
+    for joints, par in _levels(parents):
+        joints, par = np.array(joints), np.array(par)  # fresh arrays: a cached constant would keep its dtype
+        offsets = rest_joints[joints] - rest_joints[par]
+        parent_rotmats = glob_rotmats[par]
+        glob_rotmats = glob_rotmats.at[joints].set(_matmul3(parent_rotmats, rel_rotmats[joints]))
+        positions = positions.at[joints].set(_matvec3(parent_rotmats, offsets) + positions[par])
+    return glob_rotmats, positions
+
+
+def _skin(weights_t, glob_rotmats, positions, rest_joints, points_cm, offset):
+    """Linear blend skinning of rest-pose points ``(3, N)`` with transforms ``[G_R | G_t - G_R J]``, plus
+    ``offset (3,)``; returns ``(N, 3)``."""
+    translations = positions - _matvec3(glob_rotmats, rest_joints)
+    transforms = jnp.concatenate([glob_rotmats.reshape(-1, 9), translations], axis=-1)
+    blended = transforms.T @ weights_t  # (12, N)
+    x, y, z = points_cm
+    return jnp.stack([blended[3 * c] * x + blended[3 * c + 1] * y + blended[3 * c + 2] * z + blended[9 + c] + offset[c]
+                      for c in range(3)], axis=-1)
+
+
+def _posed_points(template_cm, shapedirs_cm, posedirs_cm, shape, rel_rotmats):
+    """Rest-pose points ``(3, N)`` with shape and pose blend shapes."""
+    offsets = shape @ shapedirs_cm + _pose_feature(rel_rotmats) @ posedirs_cm
+    return template_cm + offsets.reshape(3, -1)
+
+
+def _pose_feature(rel_rotmats):
+    return (rel_rotmats[1:] - jnp.eye(3, dtype=rel_rotmats.dtype)).reshape(-1)
+
+
+def _posed_skeleton(model: BodyModel, params: SMPLXParams):
+    shape = params.shape_components()
+    rel_rotmats = rotvec_to_rotmat(params.full_pose())
+    rest_joints = model.joint_template + model.joint_shapedirs @ shape
+    glob_rotmats, positions = kinematic_chain(rel_rotmats, rest_joints, model.parents)
+    return shape, rel_rotmats, rest_joints, glob_rotmats, positions
+
+
+def _with_extra_joints(model, skeleton_joints, sparse_vertices):
+    """The 127 joints: skeleton, vertex joints, landmarks (barycentric in their triangles)."""
+    vertex_joints = sparse_vertices[model.vertex_joint_slots]
+    landmarks = jnp.einsum("lkc,lk->lc", sparse_vertices[model.landmark_slots], model.landmark_bary)
+    return jnp.concatenate([skeleton_joints, vertex_joints, landmarks])
+
+
+def forward(model: BodyModel, params: SMPLXParams) -> Output:
+    """Vertices (V, 3) and the 127 joints of one body, as ``smplx.SMPLX`` computes them."""
+    shape, rel_rotmats, rest_joints, glob_rotmats, positions = _posed_skeleton(model, params)
+    points = _posed_points(model.template_cm, model.shapedirs_cm, model.posedirs_cm, shape, rel_rotmats)
+    vertices = _skin(model.weights_t, glob_rotmats, positions, rest_joints, points, params.transl)
+    return Output(vertices, _with_extra_joints(model, positions + params.transl, vertices[model.sparse_ids]))
+
+
+def forward_joints(model: BodyModel, params: SMPLXParams) -> Float[Array, "127 3"]:
+    """The 127 joints of `forward` without forming the mesh: only the vertices that vertex joints and
+    landmarks read are shaped, posed and skinned."""
+    shape, rel_rotmats, rest_joints, glob_rotmats, positions = _posed_skeleton(model, params)
+    points = _posed_points(model.sparse_template_cm, model.sparse_shapedirs_cm, model.sparse_posedirs_cm, shape,
+                           rel_rotmats)
+    sparse_vertices = _skin(model.sparse_weights_t, glob_rotmats, positions, rest_joints, points, params.transl)
+    return _with_extra_joints(model, positions + params.transl, sparse_vertices)
+
+
+def posed_skeleton(model: BodyModel, params: SMPLXParams) -> Skeleton:
+    """Global joint rotations and positions of one posed body (what copy-and-paste and IK need)."""
+    _, _, _, glob_rotmats, positions = _posed_skeleton(model, params)
+    return Skeleton(glob_rotmats, positions + params.transl)

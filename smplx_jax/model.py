@@ -1,0 +1,125 @@
+"""`BodyModel`: an SMPL-X model file as an immutable pytree, with what forward needs precomputed."""
+
+import dataclasses
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from smplx_jax import constants
+from smplx_jax.model_file import read_model_file
+
+SHAPE_SPACE_DIM = 300  # shape columns of a 400-column SMPL-X file; expression follows them
+
+
+def _static(**kwargs):
+    return dataclasses.field(metadata=dict(static=True), **kwargs)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class BodyModel:
+    """One SMPL-X model. ``S = num_betas + num_expression`` shape components, ``P = 9 * 54`` pose features.
+
+    Per-vertex arrays are coordinate-major (all x, then all y, then all z), so that the matrix products of
+    a batch of bodies need no transposes. The ``sparse_*`` arrays hold the few vertices that the vertex
+    joints and face landmarks read, so that `forward_joints` never forms the whole mesh.
+    """
+
+    template_cm: Float[Array, "3 V"]
+    shapedirs_cm: Float[Array, "S 3V"]  # shape components (S,) @ shapedirs_cm -> (3V,)
+    posedirs_cm: Float[Array, "P 3V"]  # pose feature (P,) @ posedirs_cm -> (3V,)
+    weights_t: Float[Array, "J V"]
+    joint_template: Float[Array, "J 3"]  # J_regressor @ v_template
+    joint_shapedirs: Float[Array, "J 3 S"]  # J_regressor @ shapedirs
+    faces: Int[Array, "F 3"]
+    hand_mean: Float[Array, "2 45"]  # left, right
+    hand_components: Float[Array, "2 C 45"]  # left, right; rows are PCA components
+    sparse_ids: Int[Array, "K"]  # vertex ids of the sparse vertices
+    sparse_template_cm: Float[Array, "3 K"]
+    sparse_shapedirs_cm: Float[Array, "S 3K"]
+    sparse_posedirs_cm: Float[Array, "P 3K"]
+    sparse_weights_t: Float[Array, "J K"]
+    vertex_joint_slots: Int[Array, "21"]  # vertex joints as indices into the sparse vertices
+    landmark_slots: Int[Array, "51 3"]  # landmark triangles as indices into the sparse vertices
+    landmark_bary: Float[Array, "51 3"]
+    parents: tuple[int, ...] = _static()
+    num_betas: int = _static()
+    num_expression: int = _static()
+
+    @property
+    def num_vertices(self) -> int:
+        return self.template_cm.shape[1]
+
+    @property
+    def v_template(self) -> Float[Array, "V 3"]:
+        return self.template_cm.T
+
+    @property
+    def weights(self) -> Float[Array, "V J"]:
+        return self.weights_t.T
+
+
+def load_model(path, *, num_betas: int = 10, num_expression: int = 10, dtype=jnp.float32) -> BodyModel:
+    """Load an SMPL-X model file (official ``.npz``/``.pkl``, or ours) into a `BodyModel`.
+
+    Shape columns are chosen as the ``smplx`` package does: a 400-column file has 300 shape then 100
+    expression columns, a smaller one 10 and 10. Raises `ModelFileError` naming the file and the problem.
+    """
+    path = Path(path)
+    arrays = read_model_file(path)
+    shape_dim = SHAPE_SPACE_DIM if arrays["shapedirs"].shape[-1] >= 400 else 10
+    expression_dim = arrays["shapedirs"].shape[-1] - shape_dim
+    for name, value, limit in (("num_betas", num_betas, shape_dim), ("num_expression", num_expression, expression_dim)):
+        if not 0 <= value <= limit:
+            raise ValueError(f"{name}={value}: the model file {path} has {limit} such components")
+    shapedirs = np.concatenate(
+        [arrays["shapedirs"][..., :num_betas], arrays["shapedirs"][..., shape_dim:shape_dim + num_expression]], axis=-1)
+    return _build(arrays, shapedirs, num_betas, num_expression, dtype)
+
+
+def _coordinate_major(per_vertex: np.ndarray) -> np.ndarray:
+    """(N, 3, ...) per-vertex data to (..., 3N) with column ``c * N + n``."""
+    moved = np.moveaxis(per_vertex, (0, 1), (-1, -2))
+    return moved.reshape(moved.shape[:-2] + (-1,))
+
+
+def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
+    v_template = arrays["v_template"]
+    num_vertices = v_template.shape[0]
+    j_regressor = arrays["J_regressor"]
+    posedirs = arrays["posedirs"]  # (V, 3, P)
+    faces = arrays["f"].astype(np.int64)
+    lmk_faces = faces[arrays["lmk_faces_idx"].astype(np.int64)]
+
+    # Vertices needed by the vertex joints and landmarks, and their slots among them.
+    needed = np.concatenate([np.asarray(constants.VERTEX_JOINT_IDS), lmk_faces.ravel()])
+    sparse_ids, slots = np.unique(needed, return_inverse=True)
+    num_vertex_joints = len(constants.VERTEX_JOINT_IDS)
+
+    hand_components = np.stack([arrays["hands_componentsl"], arrays["hands_componentsr"]])
+    f = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
+    return BodyModel(
+        template_cm=f(v_template.T),
+        shapedirs_cm=f(_coordinate_major(shapedirs)),
+        posedirs_cm=f(_coordinate_major(posedirs)),
+        weights_t=f(arrays["weights"].T),
+        joint_template=f(j_regressor @ v_template),
+        joint_shapedirs=f(np.einsum("jv,vcs->jcs", j_regressor, shapedirs)),
+        faces=jnp.asarray(faces, dtype=jnp.int32),
+        hand_mean=f(np.stack([arrays["hands_meanl"], arrays["hands_meanr"]])),
+        hand_components=f(hand_components),
+        sparse_ids=jnp.asarray(sparse_ids, dtype=jnp.int32),
+        sparse_template_cm=f(v_template[sparse_ids].T),
+        sparse_shapedirs_cm=f(_coordinate_major(shapedirs[sparse_ids])),
+        sparse_posedirs_cm=f(_coordinate_major(posedirs[sparse_ids])),
+        sparse_weights_t=f(arrays["weights"][sparse_ids].T),
+        vertex_joint_slots=jnp.asarray(slots[:num_vertex_joints], dtype=jnp.int32),
+        landmark_slots=jnp.asarray(slots[num_vertex_joints:].reshape(-1, 3), dtype=jnp.int32),
+        landmark_bary=f(arrays["lmk_bary_coords"]),
+        parents=tuple(int(p) for p in arrays["parents"]),
+        num_betas=num_betas,
+        num_expression=num_expression,
+    )

@@ -1,0 +1,47 @@
+"""Record the official mediapipe 0.10.21 legacy solutions' landmarks on the test images (run in its own venv).
+
+    python3 -m venv /work/mpenv && /work/mpenv/bin/pip install mediapipe==0.10.21
+    /work/mpenv/bin/python tests/data/record_mediapipe_golden.py
+
+Writes ``tests/data/mediapipe_golden.json``: per image, the pose landmarks (33 × x, y in pixels, z, visibility) of
+``mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1)`` and the hands (21 × x, y in pixels, z, with
+mediapipe's handedness label and score) of ``mp.solutions.hands.Hands(static_image_mode=True)``.
+"""
+
+import hashlib
+import json
+import os
+
+import cv2
+import mediapipe as mp
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+IMAGES = ["messi5.jpg"] + [f"pose2sim_cam01_f{i:03d}.jpg" for i in (0, 20, 40, 60, 80, 99)]
+
+
+def main() -> None:
+    out = {"mediapipe_version": mp.__version__, "images": {}}
+    with mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1) as pose, \
+            mp.solutions.hands.Hands(static_image_mode=True, max_num_hands=2, model_complexity=1) as hands:
+        for name in IMAGES:
+            bgr = cv2.imread(os.path.join(HERE, name))
+            h, w = bgr.shape[:2]
+            rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+            entry = {"width": w, "height": h, "pixels_sha256": hashlib.sha256(bgr.tobytes()).hexdigest(),
+                     "pose": None, "hands": []}
+            res = pose.process(rgb)
+            if res.pose_landmarks:
+                entry["pose"] = [[lm.x * w, lm.y * h, lm.z * w, lm.visibility] for lm in res.pose_landmarks.landmark]
+            res = hands.process(rgb)
+            for lms, cls in zip(res.multi_hand_landmarks or [], res.multi_handedness or []):
+                entry["hands"].append({
+                    "label": cls.classification[0].label, "score": cls.classification[0].score,
+                    "landmarks": [[lm.x * w, lm.y * h, lm.z * w] for lm in lms.landmark]})
+            out["images"][name] = entry
+            print(name, "pose" if entry["pose"] else "no pose", len(entry["hands"]), "hands")
+    with open(os.path.join(HERE, "mediapipe_golden.json"), "w") as f:
+        json.dump(out, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

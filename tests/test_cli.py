@@ -1,0 +1,59 @@
+"""The command line: exit codes, one-line errors, and the files it writes."""
+
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import smplx
+import torch
+
+import smplx_jax
+from jaxmocap.cli import main
+
+
+def test_model_command_writes_a_file_smplx_loads(tmp_path, capsys):
+    out = tmp_path / "models" / "smplx" / "SMPLX_NEUTRAL.npz"
+    assert main(["model", "--out", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    body = smplx.create(str(tmp_path / "models"), model_type="smplx", use_pca=False, flat_hand_mean=True)
+    with torch.no_grad():
+        joints = body(body_pose=torch.full((1, 63), 0.1)).joints
+    assert joints.shape == (1, 127, 3) and torch.isfinite(joints).all()
+    assert smplx_jax.load_model(out).num_vertices == 10475
+
+
+def test_demo_writes_the_rendered_body_model(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    image = cv2.imread(str(tmp_path / "body_model.png"))
+    assert image is not None and image.shape == (1280, 960, 3)
+    # the figure is drawn: plenty of non-white pixels in each of the four views
+    for row in (image[:640], image[640:]):
+        for view in (row[:, :480], row[:, 480:]):
+            assert (view.min(axis=2) < 200).mean() > 0.03
+    printed = capsys.readouterr().out
+    for name, shape in (("body_model", (1280, 960, 3)), ("body_model_face", (450, 1800, 3)),
+                        ("body_model_hand", (450, 1800, 3))):
+        assert str(tmp_path / f"{name}.png") in printed
+        assert cv2.imread(str(tmp_path / f"{name}.png")).shape == shape
+
+
+def test_bad_model_path_is_one_line_and_nonzero(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    proc = subprocess.run([sys.executable, "-m", "jaxmocap.cli", "model", "--out", str(blocker / "x.npz")],
+                          capture_output=True, text=True)
+    assert proc.returncode != 0
+    assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert proc.stderr.startswith("jaxmocap model: error:")
+
+
+def test_unknown_benchmark_is_an_error(capsys):
+    assert main(["bench", "--only", "nope"]) == 2
+    assert "unknown benchmark(s) nope" in capsys.readouterr().err
+
+
+def test_detect_on_missing_input_is_an_error(tmp_path, capsys):
+    assert main(["detect", str(tmp_path / "missing.mp4"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "missing.mp4" in err

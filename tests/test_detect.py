@@ -1,0 +1,254 @@
+"""The embedded detector: agreement with official mediapipe 0.10.21, OpenPose JSON I/O, bad input, model files.
+
+Model files come from the user cache (downloaded once from PyPI's mediapipe==0.10.21 wheel, as a first run does).
+"""
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from jaxmocap.detect import (Detector, MediaError, ModelFileError, detect_media, ensure_models, read_openpose_json,
+                             to_openpose, write_openpose_json)
+from jaxmocap.detect import models as model_files
+from jaxmocap.detect.hands import HandEstimator
+from jaxmocap.detect.openpose import body25_from_blazepose, json_name
+
+DATA = Path(__file__).parent / "data"
+GOLDEN = json.loads((DATA / "mediapipe_golden.json").read_text())["images"]
+MAX_MEDIAN_PX = 2.0
+
+
+@pytest.fixture(scope="module")
+def detector():
+    return Detector(static_image_mode=True, max_people=2)
+
+
+@pytest.fixture(scope="module")
+def results(detector):
+    return {name: detector(cv2.imread(str(DATA / name))) for name in GOLDEN}
+
+
+def _median_px(ours, ref, mask=None):
+    d = np.linalg.norm(np.asarray(ours)[:, :2] - np.asarray(ref)[:, :2], axis=1)
+    return float(np.median(d if mask is None else d[mask]))
+
+
+@pytest.mark.parametrize("name", sorted(GOLDEN))
+def test_pose_agrees_with_mediapipe(results, name):
+    ref = np.array(GOLDEN[name]["pose"])
+    people = results[name]
+    assert people, f"{name}: mediapipe finds a person, we find none"
+    visible = ref[:, 3] > 0.5
+    err = min(_median_px(p.body, ref, visible) for p in people)
+    vis_err = np.abs(people[0].body[:, 3] - ref[:, 3]).max()
+    print(f"{name}: body median {err:.3f} px over {visible.sum()} visible landmarks, max |Δvisibility| {vis_err:.3f}")
+    assert err <= MAX_MEDIAN_PX
+
+
+@pytest.fixture(scope="module")
+def hand_estimator():
+    paths = ensure_models()
+    return HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"])
+
+
+@pytest.mark.parametrize("name", sorted(n for n in GOLDEN if GOLDEN[n]["hands"]))
+def test_hands_agree_with_mediapipe(hand_estimator, results, name):
+    """The hand pipeline (palms -> 2 best -> landmarks, as mp.solutions.hands) matches every hand mediapipe finds;
+    the detector keeps those attached to a body wrist."""
+    image = cv2.imread(str(DATA / name))
+    size = (image.shape[1], image.shape[0])
+    hands = [hand_estimator.landmarks(image, hand_estimator.detection_roi(d, size))
+             for d in hand_estimator.detect(image)[:2]]
+    ours = [h.landmarks * (size[0], size[1], size[0]) for h in hands if h is not None]
+    attached = [h for p in results[name] for h in (p.left_hand, p.right_hand) if h is not None]
+    for ref_hand in GOLDEN[name]["hands"]:
+        ref = np.array(ref_hand["landmarks"])
+        assert ours, f"{name}: mediapipe finds a hand, we find none"
+        err = min(_median_px(h, ref) for h in ours)
+        err_attached = min([_median_px(h, ref) for h in attached] or [np.inf])
+        print(f"{name}: hand ({ref_hand['label']} {ref_hand['score']:.2f}) median {err:.3f} px; "
+              f"attached to a body: {err_attached:.3f} px")
+        assert err <= MAX_MEDIAN_PX
+    # every mediapipe hand whose wrist is near a body wrist is attached to that body, and agrees
+    for ref_hand in GOLDEN[name]["hands"]:
+        ref = np.array(ref_hand["landmarks"])
+        palm = np.linalg.norm(ref[9, :2] - ref[0, :2])
+        if min(np.linalg.norm(ref[0, :2] - p.body[w, :2]) for p in results[name] for w in (15, 16)) < palm:
+            assert min(_median_px(h, ref) for h in attached) <= MAX_MEDIAN_PX
+
+
+def test_hands_attach_to_nearest_wrist(results):
+    person = results["pose2sim_cam01_f099.jpg"][0]
+    for hand, wrist in ((person.left_hand, 15), (person.right_hand, 16)):
+        if hand is not None:
+            palm = np.linalg.norm(hand[9, :2] - hand[0, :2])
+            assert np.linalg.norm(hand[0, :2] - person.body[wrist, :2]) < 2 * palm
+
+
+def test_person_shapes(results):
+    p = results["messi5.jpg"][0]
+    assert p.body.shape == (33, 4) and p.body_world.shape == (33, 3) and p.box.shape == (4,)
+    for hand, world in ((p.left_hand, p.left_hand_world), (p.right_hand, p.right_hand_world)):
+        assert (hand is None) == (world is None)
+        if hand is not None:
+            assert hand.shape == (21, 3) and world.shape == (21, 3)
+    # world landmarks are metric, about the hips: a person is between 1 and 2.5 m tall
+    assert 0.8 < np.ptp(p.body_world[:, 1]) < 2.5
+
+
+def test_body25_mapping():
+    body = np.zeros((33, 4))
+    body[:, 0], body[:, 1], body[:, 3] = np.arange(33), 100 + np.arange(33), np.linspace(0.1, 0.9, 33)
+    b = body25_from_blazepose(body)
+    np.testing.assert_allclose(b[1, :2], (body[11, :2] + body[12, :2]) / 2)  # neck
+    np.testing.assert_allclose(b[8, :2], (body[23, :2] + body[24, :2]) / 2)  # mid-hip
+    assert b[1, 2] == min(body[11, 3], body[12, 3])
+    for j, k in {0: 0, 2: 12, 4: 16, 5: 11, 7: 15, 11: 28, 14: 27, 15: 5, 16: 2, 17: 8, 18: 7, 19: 31, 21: 29,
+                 22: 32, 24: 30}.items():
+        np.testing.assert_allclose(b[j], [body[k, 0], body[k, 1], body[k, 3]])
+    assert not b[20].any() and not b[23].any()  # small toes: missing
+
+
+def test_openpose_round_trip(results, tmp_path):
+    keypoints = to_openpose(results["messi5.jpg"] + results["pose2sim_cam01_f099.jpg"])
+    assert keypoints.shape == (2, 67, 3)
+    path = write_openpose_json(tmp_path / json_name("clip", 7), keypoints)
+    assert path.name == "clip_000000000007_keypoints.json"
+    data = json.loads(path.read_text())
+    assert data["version"] == 1.3
+    assert [len(data["people"][0][k]) for k in ("pose_keypoints_2d", "hand_left_keypoints_2d",
+                                                "hand_right_keypoints_2d", "face_keypoints_2d")] == [75, 63, 63, 0]
+    np.testing.assert_allclose(read_openpose_json(path), keypoints, atol=6e-4)
+    assert list(tmp_path.iterdir()) == [path]  # nothing left behind by the atomic write
+    with pytest.raises(ValueError, match="67, 3"):
+        write_openpose_json(tmp_path / "bad.json", np.zeros((1, 25, 3)))
+
+
+def test_reader_on_openpose_files():
+    full = read_openpose_json(DATA / "openpose" / "openpose_body_hands_face_2people_keypoints.json")
+    raw = json.loads((DATA / "openpose" / "openpose_body_hands_face_2people_keypoints.json").read_text())
+    assert full.shape == (2, 67, 3)
+    np.testing.assert_array_equal(full[0, :25].reshape(-1), raw["people"][0]["pose_keypoints_2d"])
+    np.testing.assert_array_equal(full[0, 46:].reshape(-1), raw["people"][0]["hand_right_keypoints_2d"])
+    assert not full[1, 25:46].any()
+    assert read_openpose_json(DATA / "openpose" / "openpose_no_people_keypoints.json").shape == (0, 67, 3)
+    body_only = read_openpose_json(DATA / "openpose" / "openpose_body_only_keypoints.json")
+    assert body_only.shape == (1, 67, 3) and body_only[0, :25].any() and not body_only[0, 25:].any()
+
+
+def test_reader_rejects_non_body25(tmp_path):
+    path = tmp_path / "coco_keypoints.json"
+    path.write_text(json.dumps({"version": 1.3, "people": [{"pose_keypoints_2d": [1.0] * 54}]}))
+    with pytest.raises(ValueError, match="BODY_25"):
+        read_openpose_json(path)
+    (tmp_path / "broken.json").write_text("{not json")
+    with pytest.raises(ValueError, match="cannot read"):
+        read_openpose_json(tmp_path / "broken.json")
+
+
+def test_grayscale_rgba_and_8k_images(detector, results):
+    frame = cv2.imread(str(DATA / "pose2sim_cam01_f040.jpg"))
+    gray = detector(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+    assert gray and _median_px(gray[0].body, results["pose2sim_cam01_f040.jpg"][0].body) < 5.0  # close, not equal
+    bgr = cv2.imread(str(DATA / "messi5.jpg"))
+    ref = results["messi5.jpg"][0].body
+    rgba = detector(cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA))
+    assert rgba and _median_px(rgba[0].body, ref) < 1e-6  # alpha dropped: identical
+    big = cv2.resize(bgr, (7680, int(round(7680 * bgr.shape[0] / bgr.shape[1]))), interpolation=cv2.INTER_LINEAR)
+    people = detector(big)
+    scale = big.shape[1] / bgr.shape[1]
+    assert people and _median_px(people[0].body / scale, ref) < 3.0
+    with pytest.raises(ValueError, match="uint8"):
+        detector(bgr.astype(np.float32))
+
+
+def test_detect_media_on_images(tmp_path):
+    folder = tmp_path / "images"
+    folder.mkdir()
+    shutil.copy(DATA / "messi5.jpg", folder / "messi5.jpg")
+    cv2.imwrite(str(folder / "blank.png"), np.full((240, 320, 3), 127, np.uint8))
+    cv2.imwrite(str(folder / "rgba.png"), cv2.cvtColor(cv2.imread(str(DATA / "messi5.jpg")), cv2.COLOR_BGR2BGRA))
+    out = tmp_path / "out"
+    paths = detect_media(folder, out, overlay=True, progress=False)
+    assert [p.name for p in paths] == ["blank_keypoints.json", "messi5_keypoints.json", "rgba_keypoints.json"]
+    assert json.loads(paths[0].read_text()) == {"version": 1.3, "people": []}
+    assert read_openpose_json(paths[1]).shape == (1, 67, 3)
+    assert (out / "overlay" / "messi5.jpg").is_file()
+    single = detect_media(DATA / "messi5.jpg", tmp_path / "single", progress=False)
+    np.testing.assert_allclose(read_openpose_json(single[0]), read_openpose_json(paths[1]))
+
+
+def test_detect_media_on_video_tracks(tmp_path):
+    cap = cv2.VideoCapture(str(Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"))
+    clip = tmp_path / "clip.mp4"
+    writer = None
+    for _ in range(8):
+        ok, frame = cap.read()
+        assert ok
+        frame = cv2.resize(frame, (540, 960), interpolation=cv2.INTER_AREA)
+        if writer is None:
+            writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"mp4v"), 60, (540, 960))
+        writer.write(frame)
+    writer.release()
+    paths = detect_media(clip, tmp_path / "out", overlay=True, progress=False)
+    assert [p.name for p in paths] == [f"clip_{i:012d}_keypoints.json" for i in range(8)]
+    keypoints = np.stack([read_openpose_json(p)[0] for p in paths])
+    assert (keypoints[:, :25, 2] > 0.5).sum(1).min() >= 15  # the person is tracked on every frame
+    assert np.abs(np.diff(keypoints[:, 1, :2], axis=0)).max() < 30  # the neck moves smoothly at 60 fps
+    assert (tmp_path / "out" / "clip_overlay.mp4").stat().st_size > 0
+
+
+def test_bad_media(tmp_path):
+    (tmp_path / "broken.jpg").write_bytes(b"this is not a jpeg")
+    with pytest.raises(MediaError, match="cannot read image"):
+        detect_media(tmp_path / "broken.jpg", tmp_path / "out", progress=False)
+    (tmp_path / "empty.mp4").write_bytes(b"")
+    with pytest.raises(MediaError, match="empty.mp4"):
+        detect_media(tmp_path / "empty.mp4", tmp_path / "out", progress=False)
+    with pytest.raises(MediaError, match="does not exist"):
+        detect_media(tmp_path / "missing.mp4", tmp_path / "out", progress=False)
+    (tmp_path / "no_images").mkdir()
+    with pytest.raises(MediaError, match="no images"):
+        detect_media(tmp_path / "no_images", tmp_path / "out", progress=False)
+
+
+def test_zero_frame_video(tmp_path):
+    path = tmp_path / "zero.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, (64, 64))
+    writer.release()
+    with pytest.raises(MediaError, match="zero.avi"):
+        detect_media(path, tmp_path / "out", progress=False)
+
+
+def test_model_files_verified(tmp_path, monkeypatch):
+    paths = ensure_models()
+    assert sorted(paths) == sorted(model_files.MODEL_FILES)
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name, path in paths.items():
+        shutil.copy(path, copy / name)
+    assert model_files.model_path("hand_landmark_full.tflite", copy) == copy / "hand_landmark_full.tflite"
+    with open(copy / "pose_detection.tflite", "r+b") as f:
+        f.seek(1000)
+        f.write(b"\x00corrupt")
+    with pytest.raises(ModelFileError, match="corrupt"):
+        model_files.model_path("pose_detection.tflite", copy)
+    monkeypatch.setenv("JAXMOCAP_MEDIAPIPE_DIR", str(tmp_path / "nowhere"))
+    with pytest.raises(ModelFileError, match="JAXMOCAP_MEDIAPIPE_DIR"):
+        Detector()
+
+
+def test_model_download_failure_is_one_clear_error(tmp_path, monkeypatch):
+    class Failed:
+        returncode, stdout, stderr = 1, "", "ERROR: Could not find a version that satisfies the requirement"
+
+    monkeypatch.delenv("JAXMOCAP_MEDIAPIPE_DIR", raising=False)
+    monkeypatch.setenv("JAXMOCAP_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(model_files.subprocess, "run", lambda *a, **k: Failed())
+    with pytest.raises(ModelFileError, match="cannot download mediapipe==0.10.21") as info:
+        ensure_models()
+    assert "\n" not in str(info.value)

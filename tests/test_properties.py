@@ -1,0 +1,80 @@
+"""Properties of the forward passes: jit = eager, vmap = loop, no recompilation, gradients."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import load
+from params_util import random_params
+
+import smplx_jax
+
+FORWARD = jax.jit(smplx_jax.forward)
+JOINTS = jax.jit(smplx_jax.forward_joints)
+
+
+def _one(params, i):
+    return jax.tree.map(lambda a: a[i], params)
+
+
+def test_jit_equals_eager(default_model_dir):
+    model = load(default_model_dir)
+    params = _one(random_params(seed=3, batch=1), 0)
+    eager, jitted = smplx_jax.forward(model, params), FORWARD(model, params)
+    np.testing.assert_allclose(np.asarray(jitted.vertices), np.asarray(eager.vertices), atol=2e-6)
+    np.testing.assert_allclose(np.asarray(jitted.joints), np.asarray(eager.joints), atol=2e-6)
+    np.testing.assert_allclose(np.asarray(JOINTS(model, params)), np.asarray(smplx_jax.forward_joints(model, params)),
+                               atol=2e-6)
+
+
+def test_vmap_equals_loop(default_model_dir):
+    model = load(default_model_dir)
+    params = random_params(seed=4, batch=3)
+    batched = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))(model, params)
+    for i in range(3):
+        np.testing.assert_allclose(np.asarray(batched[i]), np.asarray(JOINTS(model, _one(params, i))), atol=2e-6)
+
+
+def test_second_call_does_not_recompile(default_model_dir):
+    model = load(default_model_dir)
+    fn = jax.jit(smplx_jax.forward_joints)
+    fn(model, _one(random_params(seed=5, batch=1), 0))
+    again = smplx_jax.load_model(default_model_dir / "smplx" / "SMPLX_NEUTRAL.npz")  # new arrays, same structure
+    fn(again, _one(random_params(seed=6, batch=1), 0))
+    assert fn._cache_size() == 1
+
+
+def test_output_shapes(default_model_dir):
+    model = load(default_model_dir)
+    out = FORWARD(model, smplx_jax.SMPLXParams.zeros())
+    assert out.vertices.shape == (model.num_vertices, 3) and out.joints.shape == (127, 3)
+    assert out.vertices.dtype == jnp.float32
+
+
+def _loss(model, params, weights):
+    return jnp.sum(smplx_jax.forward_joints(model, params) * weights)
+
+
+@pytest.mark.parametrize("at_zero", [False, True], ids=["random_pose", "zero_pose"])
+def test_gradients_match_finite_differences(default_model_dir, at_zero):
+    """Central differences in float64 of a random linear functional of all 127 joints."""
+    with jax.enable_x64(True):
+        model = smplx_jax.load_model(default_model_dir / "smplx" / "SMPLX_NEUTRAL.npz", dtype=jnp.float64)
+        params = jax.tree.map(lambda a: jnp.asarray(a[0], jnp.float64), random_params(seed=7, batch=1, max_angle=2.0))
+        if at_zero:
+            params = jax.tree.map(jnp.zeros_like, params)
+        weights = jnp.asarray(np.random.default_rng(8).normal(size=(127, 3)))
+        grads = jax.jit(jax.grad(_loss, argnums=1))(model, params, weights)
+        loss = jax.jit(_loss)
+        rng = np.random.default_rng(9)
+        for name in ("global_orient", "body_pose", "right_hand_pose", "jaw_pose", "betas", "expression"):
+            value = getattr(params, name)
+            grad = np.asarray(getattr(grads, name))
+            assert np.all(np.isfinite(grad)), name
+            for _ in range(4):
+                idx = tuple(int(rng.integers(0, n)) for n in value.shape)
+                eps = 1e-6
+                plus = params.replace(**{name: value.at[idx].add(eps)})
+                minus = params.replace(**{name: value.at[idx].add(-eps)})
+                numeric = (loss(model, plus, weights) - loss(model, minus, weights)) / (2 * eps)
+                assert abs(float(numeric) - grad[idx]) <= 1e-6 * max(1.0, abs(float(numeric))), (name, idx)
