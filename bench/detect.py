@@ -1,11 +1,15 @@
 """Detector speed in tracking (video) mode, ours vs official mediapipe 0.10.21, on the bundled Pose2Sim clip.
 
-    python bench/detect.py [--frames N] [--mediapipe-python /work/mpenv/bin/python]
+    python bench/detect.py [--out bench/results] [--quick] [--frames N] [--mediapipe-python mp/bin/python]
 
 Ours: ``jaxmocap.detect.Detector(static_image_mode=False)`` (pose + hands, LiteRT, 2 threads). Peer: the legacy
 ``mp.solutions.holistic.Holistic`` (pose + hands, face off is impossible in legacy holistic, so also
 ``mp.solutions.pose`` + ``mp.solutions.hands`` run one after the other), in the mediapipe venv as a subprocess, same
-frames, same machine, same run. Prints a table and writes ``bench/results/detect.json``.
+frames, same machine, same run. Prints a table and writes ``<out>/detect.json``.
+
+The peer needs its own environment (mediapipe 0.10.21 pins numpy<2), created once in the repository root with
+``python3 -m venv mp && mp/bin/pip install mediapipe==0.10.21`` (about 90 s); ``--mediapipe-python`` or
+``$JAXMOCAP_MEDIAPIPE_PYTHON`` point elsewhere. Without it the peer's rows read "n/a".
 """
 
 from __future__ import annotations
@@ -82,10 +86,13 @@ def time_ours(frames, hands: bool, warm: int = 3) -> tuple[float, int, int]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
+    parser.add_argument("--quick", action="store_true", help="30 frames")
     parser.add_argument("--frames", type=int, default=100)
-    parser.add_argument("--mediapipe-python", default="/work/mpenv/bin/python")
+    parser.add_argument("--mediapipe-python",
+                        default=os.environ.get("JAXMOCAP_MEDIAPIPE_PYTHON", str(ROOT / "mp" / "bin" / "python")))
     args = parser.parse_args()
-    frames = read_frames(args.frames)
+    frames = read_frames(30 if args.quick else args.frames)
     rows = {}
     ms, bodies, hands = time_ours(frames, hands=True)
     rows["jaxmocap pose+hands (tracking)"] = {"ms_per_frame": ms, "frames_with_body": bodies, "hands": hands}
@@ -110,10 +117,11 @@ def main() -> None:
     for name, row in rows.items():
         ms = row["ms_per_frame"]
         print(f"{name:<48}{(f'{ms:.1f}' if isinstance(ms, float) else ms):>10}{row.get('frames_with_body', ''):>12}{row.get('hands', ''):>13}")
-    out = ROOT / "bench" / "results" / "detect.json"
+    out = args.out / "detect.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"clip": CLIP.name, "frames": len(frames), "cpus": os.cpu_count(), "rows": rows},
                               indent=1))
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

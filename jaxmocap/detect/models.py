@@ -16,6 +16,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from smplx_jax.default_model import cache_root
+
 from ..errors import InputError
 
 MEDIAPIPE_VERSION = "0.10.21"
@@ -47,8 +49,7 @@ class ModelFileError(InputError):
 
 def cache_dir() -> Path:
     """Where downloaded model files live: ``$JAXMOCAP_CACHE/mediapipe-0.10.21`` or ``~/.cache/jaxmocap/...``."""
-    root = os.environ.get("JAXMOCAP_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "jaxmocap")
-    return Path(root) / f"mediapipe-{MEDIAPIPE_VERSION}"
+    return cache_root() / f"mediapipe-{MEDIAPIPE_VERSION}"
 
 
 def _sha256(path: Path) -> str:
