@@ -88,7 +88,6 @@ def _coordinate_major(per_vertex: np.ndarray) -> np.ndarray:
 
 def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
     v_template = arrays["v_template"]
-    num_vertices = v_template.shape[0]
     j_regressor = arrays["J_regressor"]
     posedirs = arrays["posedirs"]  # (V, 3, P)
     faces = arrays["f"].astype(np.int64)

@@ -143,7 +143,7 @@ def _check(path, raw):
         fail("v_template", "(V, 3)", v_template.shape)
     num_vertices = v_template.shape[0]
     if num_vertices <= max(constants.VERTEX_JOINT_IDS):
-        fail("v_template", f"(V, 3) with V > {max(constants.VERTEX_JOINT_IDS)} (SMPL-X vertex joints)", v_template.shape)
+        fail("v_template", f"(V, 3), V > {max(constants.VERTEX_JOINT_IDS)} (SMPL-X vertex joints)", v_template.shape)
     j, p = constants.NUM_JOINTS, 9 * (constants.NUM_JOINTS - 1)
     shapedirs = numeric("shapedirs")
     if shapedirs.ndim != 3 or shapedirs.shape[:2] != (num_vertices, 3) or shapedirs.shape[2] < 20:
@@ -175,7 +175,8 @@ def _check(path, raw):
     parents[0] = -1
     if np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, j)):
         raise ModelFileError(f"{path}: key 'kintree_table' does not list each joint's parent before the joint")
-    out = {k: np.asarray(v, dtype=np.float64) for k, v in raw.items() if k not in ("f", "lmk_faces_idx", "kintree_table")}
+    integer_keys = ("f", "lmk_faces_idx", "kintree_table")
+    out = {k: np.asarray(v, dtype=np.float64) for k, v in raw.items() if k not in integer_keys}
     for key, value in out.items():
         if not np.all(np.isfinite(value)):
             raise ModelFileError(f"{path}: key {key!r} holds NaN or infinite values")

@@ -23,7 +23,7 @@ def rotvec_to_rotmat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
     small = theta2 < _SMALL
     theta = jnp.sqrt(jnp.where(small, 1.0, theta2))
     sinc = jnp.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, jnp.sin(theta) / theta)
-    cosc = jnp.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - jnp.cos(theta)) / jnp.where(small, 1.0, theta2))
+    cosc = jnp.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - jnp.cos(theta)) / (theta * theta))
     k = _skew(rotvec)
     eye = jnp.eye(3, dtype=rotvec.dtype)
     return eye + sinc[..., None, None] * k + cosc[..., None, None] * (k @ k)

@@ -64,7 +64,8 @@ def test_hand_forward_with_a_bent_wrist(hand_setup):
     side of the wrist and stay within a few centimetres."""
     side, model, hand = hand_setup
     wrist, _ = SIDES[side]
-    params = jax.tree.map(lambda a: a[0], random_params(seed=30, batch=1, max_angle=1.5)).replace(expression=jnp.zeros(10))
+    params = jax.tree.map(lambda a: a[0], random_params(seed=30, batch=1, max_angle=1.5))
+    params = params.replace(expression=jnp.zeros(10))
     verts, body_verts, joints, body_joints = _compare(model, hand, side, params)
     fingers = constants.LEFT_HAND_JOINTS if side == "left" else constants.RIGHT_HAND_JOINTS
     pure = np.asarray(model.weights)[np.asarray(hand.vertex_ids)][:, (wrist,) + fingers].sum(axis=1) > 1 - 1e-6
