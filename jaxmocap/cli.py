@@ -29,10 +29,24 @@ def _cmd_detect(args):
     print(f"wrote {len(written)} OpenPose JSON file(s) to {args.out}")
 
 
+def _cmd_export(args):
+    from jaxmocap.export import export_motion
+
+    path = export_motion(args.motion, args.format, args.out, model_path=args.model, focal_px=args.focal)
+    print(f"wrote {path}")
+
+
 def _cmd_bench(args):
     from jaxmocap.benchmarks import run_benchmarks
 
     run_benchmarks(args.only, args.out, quick=args.quick)
+
+
+def _cmd_convert_frankmocap(args):
+    from jaxmocap.regressors import convert_frankmocap
+
+    for path in convert_frankmocap(args.hand, args.hand_mean, args.body, args.out):
+        print(f"wrote {path}")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -53,9 +67,24 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_detect)
 
+    p = commands.add_parser("export", help="a motion.npz as BVH (skeleton) or glTF 2.0 (skinned mesh) animation")
+    p.add_argument("motion", type=Path, help="motion.npz")
+    p.add_argument("--format", choices=("bvh", "gltf"), required=True)
+    p.add_argument("--out", type=Path, required=True, help="file to write (.bvh; .glb binary or .gltf JSON)")
+    p.add_argument("--model", type=Path, default=None, help="the body model the motion was made with (default model)")
+    p.add_argument("--focal", type=float, default=None, help="focal length in pixels (default: image diagonal)")
+    p.set_defaults(run=_cmd_export)
+
     p = commands.add_parser("model", help="write the license-free default body model as an SMPL-X .npz")
     p.add_argument("--out", type=Path, required=True, help="file to write, e.g. models/smplx/SMPLX_NEUTRAL.npz")
     p.set_defaults(run=_cmd_model)
+
+    p = commands.add_parser("convert-frankmocap", help="FrankMocap's PyTorch checkpoints -> our weights (needs torch)")
+    p.add_argument("--hand", type=Path, required=True, help="hand module checkpoint, pose_shape_best.pth")
+    p.add_argument("--hand-mean", type=Path, required=True, help="the hand's mean_mano_params.pkl")
+    p.add_argument("--body", type=Path, required=True, help="body module checkpoint (SPIN/HMR .pt)")
+    p.add_argument("--out", type=Path, required=True, help="output folder (regressors.json, hand.npz, body.npz)")
+    p.set_defaults(run=_cmd_convert_frankmocap)
 
     p = commands.add_parser("bench", help="the benchmark suite, side by side with peers (needs a source checkout)")
     p.add_argument("--only", nargs="*", default=None, help="benchmark names, e.g. body_model")

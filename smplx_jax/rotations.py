@@ -19,6 +19,7 @@ def _skew(v: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
 
 def rotvec_to_rotmat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
     """Rodrigues' formula R = I + sin(t)/t K + (1 - cos t)/t^2 K^2 with K = skew(rotvec), t = |rotvec|."""
+    rotvec = jnp.asarray(rotvec)
     theta2 = jnp.sum(rotvec * rotvec, axis=-1)
     small = theta2 < _SMALL
     theta = jnp.sqrt(jnp.where(small, 1.0, theta2))

@@ -1,0 +1,8 @@
+"""Animation files from a motion: BVH (skeleton) and binary glTF 2.0 (skinned mesh), y up, metres."""
+
+from jaxmocap.export.animation import Animation, animation, global_transforms
+from jaxmocap.export.bvh import write_bvh
+from jaxmocap.export.files import export_motion, read_motion
+from jaxmocap.export.gltf import write_gltf
+
+__all__ = ["Animation", "animation", "export_motion", "global_transforms", "read_motion", "write_bvh", "write_gltf"]

@@ -1,0 +1,86 @@
+"""A motion (``motion.npz`` arrays) as a skeletal animation in a y-up world frame, shared by the exporters.
+
+The motion's global orientation is in the image's camera frame (x right, y down, z away from the camera); the
+world frame here is that camera's frame turned by pi about x (x right, y up, z towards the camera), the frame
+glTF and Blender's importers expect. The weak-perspective camera gives depth ``focal / camera_scale`` for an
+assumed focal length in pixels (default: the image diagonal, a ~53 degree field of view).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import smplx_jax
+from smplx_jax import constants
+from smplx_jax.rotations import rotvec_to_rotmat
+
+CAMERA_TO_WORLD = np.diag([1.0, -1.0, -1.0])
+POSE_KEYS = ("global_orient", "body_pose", "jaw_pose", "left_hand_pose", "right_hand_pose")
+
+
+@dataclass(frozen=True)
+class Animation:
+    """``T`` frames of the 55-joint skeleton: local rotations (the root's relative to the world), the root's
+    world position, and the rest skeleton of the motion's mean shape."""
+
+    names: tuple[str, ...]
+    parents: tuple[int, ...]
+    rest_joints: np.ndarray  # (55, 3) rest-pose joint positions, metres
+    local_rotmats: np.ndarray  # (T, 55, 3, 3)
+    root_positions: np.ndarray  # (T, 3) world position of joint 0
+    betas: np.ndarray  # (B,) the mean shape over valid frames
+    fps: float
+
+
+def _held(valid: np.ndarray) -> np.ndarray:
+    """For each frame, the index of the nearest earlier valid frame (the first valid one before any)."""
+    if not valid.any():
+        raise ValueError("the motion has no valid frame to export")
+    index = np.where(valid, np.arange(len(valid)), -1)
+    index = np.maximum.accumulate(index)
+    return np.where(index < 0, np.argmax(valid), index)
+
+
+def full_pose(motion) -> np.ndarray:
+    """(T, 55, 3) axis-angle in SMPL-X joint order; the eyes at rest (motion.npz keeps no eye pose)."""
+    t = len(motion["global_orient"])
+    eyes = np.zeros((t, 2, 3))
+    return np.concatenate([
+        motion["global_orient"][:, None], motion["body_pose"], motion["jaw_pose"][:, None], eyes,
+        motion["left_hand_pose"], motion["right_hand_pose"],
+    ], axis=1).astype(np.float64)
+
+
+def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None) -> Animation:
+    """The world-frame animation of a motion; invalid frames hold the previous valid frame's pose."""
+    valid = np.asarray(motion["valid"], bool)
+    held = _held(valid)
+    betas = np.asarray(motion["betas"], np.float64)[valid].mean(axis=0)
+    num = betas.shape[0]
+    rest_joints = np.asarray(model.joint_template, np.float64) + np.asarray(model.joint_shapedirs)[..., :num] @ betas
+    local = np.asarray(rotvec_to_rotmat(full_pose(motion)[held]), np.float64)
+    local[:, 0] = CAMERA_TO_WORLD @ local[:, 0]
+
+    width, height = np.asarray(motion["image_size"], np.float64)
+    focal = float(np.hypot(width, height)) if focal_px is None else focal_px
+    scale = np.asarray(motion["camera_scale"], np.float64)[held]
+    origin = np.concatenate([
+        (np.asarray(motion["camera_trans"], np.float64)[held] - [width / 2, height / 2]) / scale[:, None],
+        (focal / scale)[:, None],
+    ], axis=1)  # the body model's origin in the camera frame
+    root_camera = origin + np.asarray(motion["transl"], np.float64)[held] + rest_joints[0]
+    return Animation(
+        names=constants.JOINT_NAMES, parents=model.parents, rest_joints=rest_joints, local_rotmats=local,
+        root_positions=root_camera @ CAMERA_TO_WORLD.T, betas=betas, fps=float(motion["fps"]))
+
+
+def global_transforms(anim: Animation) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations (T, 55, 3, 3) and positions (T, 55, 3) of every joint."""
+    rot = np.zeros_like(anim.local_rotmats)
+    pos = np.zeros(anim.local_rotmats.shape[:2] + (3,))
+    rot[:, 0], pos[:, 0] = anim.local_rotmats[:, 0], anim.root_positions
+    for j in range(1, len(anim.parents)):
+        p = anim.parents[j]
+        rot[:, j] = rot[:, p] @ anim.local_rotmats[:, j]
+        pos[:, j] = pos[:, p] + np.einsum("tij,j->ti", rot[:, p], anim.rest_joints[j] - anim.rest_joints[p])
+    return rot, pos

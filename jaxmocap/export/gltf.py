@@ -1,0 +1,145 @@
+"""glTF 2.0 export (binary ``.glb``, or ``.gltf`` JSON): the body mesh of the motion's mean shape, skinned to the 55-joint skeleton
+(four strongest joints per vertex), with one animation; glTF viewers in browsers and Blender play it.
+
+Pose-corrective blend shapes are not exported (glTF skinning cannot express them); for the default body model
+they are zero, so the file reproduces the model exactly.
+"""
+
+import base64
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+
+import smplx_jax
+from jaxmocap.export.animation import Animation
+from jaxmocap.io import atomic_write_bytes, atomic_write_text
+from smplx_jax.rotations import rotmat_to_quat
+
+FLOAT, USHORT, UINT = 5126, 5123, 5125
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+_TYPES = {1: "SCALAR", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+
+
+def rest_mesh(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
+    """(V, 3) rest-pose vertices of a shape."""
+    offsets = betas @ np.asarray(model.shapedirs_cm)[: len(betas)]
+    return (np.asarray(model.template_cm, np.float64) + offsets.reshape(3, -1)).T
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    tri = vertices[faces]
+    face_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, faces[:, k], face_normals)
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+
+
+def top_weights(weights: np.ndarray, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """The ``count`` strongest joints of each vertex and their weights, renormalised to sum to 1."""
+    joints = np.argsort(-weights, axis=1, kind="stable")[:, :count]
+    top = np.take_along_axis(weights, joints, axis=1)
+    return joints, top / top.sum(axis=1, keepdims=True)
+
+
+def _quaternions_xyzw(rotmats: np.ndarray) -> np.ndarray:
+    """(T, 4) glTF quaternions, signs chosen so that consecutive frames interpolate the short way."""
+    quat = np.asarray(rotmat_to_quat(rotmats), np.float64)
+    for t in range(1, len(quat)):
+        if quat[t] @ quat[t - 1] < 0:
+            quat[t] = -quat[t]
+    return quat[:, [1, 2, 3, 0]]
+
+
+class _Buffer:
+    """Accumulates binary data and the glTF bufferViews/accessors that describe it."""
+
+    def __init__(self):
+        self.chunks, self.size, self.views, self.accessors = [], 0, [], []
+
+    def add(self, array: np.ndarray, component: int, target=None, bounds=False) -> int:
+        data = np.ascontiguousarray(array).tobytes()
+        view = {"buffer": 0, "byteOffset": self.size, "byteLength": len(data)}
+        if target:
+            view["target"] = target
+        self.views.append(view)
+        self.chunks.append(data + b"\0" * (-len(data) % 4))
+        self.size += len(data) + (-len(data) % 4)
+        width = 1 if array.ndim == 1 else int(np.prod(array.shape[1:]))
+        accessor = {"bufferView": len(self.views) - 1, "componentType": component, "count": len(array),
+                    "type": _TYPES[width]}
+        if bounds:
+            flat = array.reshape(len(array), -1)
+            accessor["min"], accessor["max"] = flat.min(axis=0).tolist(), flat.max(axis=0).tolist()
+        self.accessors.append(accessor)
+        return len(self.accessors) - 1
+
+
+def gltf_document(model: smplx_jax.BodyModel, anim: Animation) -> tuple[dict, bytes]:
+    """The glTF JSON document and its binary buffer."""
+    num_joints = len(anim.parents)
+    vertices = rest_mesh(model, anim.betas)
+    faces = np.asarray(model.faces)
+    joints, weights = top_weights(np.asarray(model.weights_t, np.float64).T)
+    buf = _Buffer()
+    attributes = {
+        "POSITION": buf.add(vertices.astype(np.float32), FLOAT, ARRAY_BUFFER, bounds=True),
+        "NORMAL": buf.add(vertex_normals(vertices, faces).astype(np.float32), FLOAT, ARRAY_BUFFER),
+        "JOINTS_0": buf.add(joints.astype(np.uint16), USHORT, ARRAY_BUFFER),
+        "WEIGHTS_0": buf.add(weights.astype(np.float32), FLOAT, ARRAY_BUFFER),
+    }
+    indices = buf.add(faces.reshape(-1).astype(np.uint32), UINT, ELEMENT_ARRAY_BUFFER, bounds=True)
+    inverse_bind = np.tile(np.eye(4), (num_joints, 1, 1))
+    inverse_bind[:, :3, 3] = -anim.rest_joints
+    ibm = buf.add(inverse_bind.transpose(0, 2, 1).reshape(num_joints, 16).astype(np.float32), FLOAT)
+
+    times = buf.add((np.arange(len(anim.local_rotmats)) / anim.fps).astype(np.float32), FLOAT, bounds=True)
+    samplers, channels = [], []
+    for j in range(num_joints):
+        rotations = buf.add(_quaternions_xyzw(anim.local_rotmats[:, j]).astype(np.float32), FLOAT)
+        samplers.append({"input": times, "output": rotations, "interpolation": "LINEAR"})
+        channels.append({"sampler": j, "target": {"node": j, "path": "rotation"}})
+    samplers.append({"input": times, "output": buf.add(anim.root_positions.astype(np.float32), FLOAT),
+                     "interpolation": "LINEAR"})
+    channels.append({"sampler": num_joints, "target": {"node": 0, "path": "translation"}})
+
+    nodes = []
+    for j in range(num_joints):
+        offset = anim.rest_joints[j] - (anim.rest_joints[anim.parents[j]] if j else 0.0)
+        node = {"name": anim.names[j], "translation": offset.tolist()}
+        children = [c for c in range(num_joints) if anim.parents[c] == j]
+        if children:
+            node["children"] = children
+        nodes.append(node)
+    nodes.append({"name": "body", "mesh": 0, "skin": 0})
+    document = {
+        "asset": {"version": "2.0", "generator": "jaxmocap"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, num_joints]}],
+        "nodes": nodes,
+        "meshes": [{"name": "body", "primitives": [{"attributes": attributes, "indices": indices, "material": 0}]}],
+        "materials": [{"name": "skin", "pbrMetallicRoughness": {
+            "baseColorFactor": [0.85, 0.68, 0.58, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}}],
+        "skins": [{"joints": list(range(num_joints)), "inverseBindMatrices": ibm, "skeleton": 0}],
+        "animations": [{"name": "motion", "samplers": samplers, "channels": channels}],
+        "accessors": buf.accessors,
+        "bufferViews": buf.views,
+        "buffers": [{"byteLength": buf.size}],
+    }
+    return document, b"".join(buf.chunks)
+
+
+def write_gltf(path, model: smplx_jax.BodyModel, anim: Animation) -> Path:
+    """Write glTF atomically: binary (``.glb``) unless the name ends in ``.gltf`` (JSON, buffer embedded)."""
+    document, binary = gltf_document(model, anim)
+    if Path(path).suffix.lower() == ".gltf":
+        document["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(binary).decode()
+        return atomic_write_text(path, json.dumps(document, separators=(",", ":")))
+    text = json.dumps(document, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)
+    length = 12 + 8 + len(text) + 8 + len(binary)
+    header = struct.pack("<4sII", b"glTF", 2, length)
+    chunks = struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(binary), b"BIN\0") + binary
+    return atomic_write_bytes(path, header + chunks)

@@ -1,0 +1,199 @@
+"""BVH and glTF exports: they parse, have the motion's frames, and reproduce the model's skeleton and mesh."""
+
+import json
+import struct
+
+import jax
+import numpy as np
+import pytest
+from conftest import load
+from params_util import random_params
+
+import smplx_jax
+from jaxmocap.export import animation, global_transforms, write_bvh, write_gltf
+from jaxmocap.export.animation import CAMERA_TO_WORLD
+from smplx_jax.rotations import quat_to_rotmat, rotvec_to_rotmat
+
+T, FPS, SIZE, FOCAL = 12, 25.0, (1000.0, 800.0), 1200.0
+FORWARD = jax.jit(jax.vmap(smplx_jax.forward, in_axes=(None, 0)))
+
+
+@pytest.fixture(scope="module")
+def case(default_model_dir):
+    """A motion of T frames (frame 3 invalid) and the parameters it came from."""
+    model = load(default_model_dir)
+    params = random_params(seed=40, batch=T, max_angle=0.8)
+    flip = rotvec_to_rotmat(np.array([np.pi, 0.0, 0.0]))  # image frame: y down
+    global_orient = np.asarray(smplx_jax.rotations.rotmat_to_rotvec(flip @ rotvec_to_rotmat(params.global_orient)))
+    betas = np.repeat(np.asarray(params.betas[:1]), T, axis=0)
+    params = params.replace(global_orient=global_orient, betas=betas, expression=np.zeros((T, 10), np.float32),
+                            transl=np.zeros((T, 3), np.float32), leye_pose=np.zeros((T, 3), np.float32),
+                            reye_pose=np.zeros((T, 3), np.float32))
+    rng = np.random.default_rng(41)
+    motion = {k: np.asarray(getattr(params, k)) for k in
+              ("global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "betas", "transl")}
+    motion |= {"camera_scale": rng.uniform(250, 350, T), "camera_trans": rng.uniform(300, 600, (T, 2)),
+               "valid": np.arange(T) != 3, "fps": np.array(FPS), "image_size": np.array(SIZE)}
+    return model, params, motion
+
+
+def _expected_world(points_camera_model, motion, frame):
+    """Where the motion puts model-frame points in the world, by the exporter's camera convention."""
+    s, t = motion["camera_scale"][frame], motion["camera_trans"][frame]
+    origin = np.concatenate([(t - np.array(SIZE) / 2) / s, [FOCAL / s]])
+    return (points_camera_model + origin) @ CAMERA_TO_WORLD.T
+
+
+def test_animation_matches_the_posed_skeleton(case):
+    model, params, motion = case
+    anim = animation(model, motion, focal_px=FOCAL)
+    _, positions = global_transforms(anim)
+    skeleton = jax.vmap(smplx_jax.posed_skeleton, in_axes=(None, 0))(model, params)
+    for frame in (0, 5, T - 1):
+        expected = _expected_world(np.asarray(skeleton.joints[frame]), motion, frame)
+        np.testing.assert_allclose(positions[frame], expected, atol=1e-5)
+    np.testing.assert_array_equal(anim.local_rotmats[3], anim.local_rotmats[2])  # invalid frame holds
+    assert not np.allclose(positions[4], positions[2])
+
+
+def _parse_bvh(text):
+    lines = iter(text.splitlines())
+    names, parents, offsets, stack = [], [], [], []
+    for line in lines:
+        words = line.split()
+        if words[0] in ("ROOT", "JOINT"):
+            names.append(words[1])
+            parents.append(stack[-1] if stack else -1)
+        elif words[0] == "End":
+            next(lines), next(lines), next(lines)  # { OFFSET }
+        elif words[0] == "OFFSET":
+            offsets.append([float(w) for w in words[1:]])
+        elif words[0] == "{":
+            stack.append(len(names) - 1)
+        elif words[0] == "}":
+            stack.pop()
+        elif words[0] == "MOTION":
+            break
+    frames = int(next(lines).split()[1])
+    frame_time = float(next(lines).split()[2])
+    values = np.array([[float(w) for w in next(lines).split()] for _ in range(frames)])
+    return names, parents, np.array(offsets), frame_time, values
+
+
+def _zyx(deg):
+    z, y, x = np.radians(deg)
+    rz = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
+    ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
+    rx = np.array([[1, 0, 0], [0, np.cos(x), -np.sin(x)], [0, np.sin(x), np.cos(x)]])
+    return rz @ ry @ rx
+
+
+def test_bvh_parses_and_reproduces_the_skeleton(case, tmp_path):
+    model, _, motion = case
+    anim = animation(model, motion, focal_px=FOCAL)
+    path = write_bvh(tmp_path / "motion.bvh", anim)
+    names, parents, offsets, frame_time, values = _parse_bvh(path.read_text())
+    assert len(names) == 55 and values.shape == (T, 6 + 3 * 54) and frame_time == pytest.approx(1 / FPS)
+    _, expected = global_transforms(anim)
+    for frame in (0, 7):
+        rot, pos = [None] * 55, [None] * 55
+        for k, p in enumerate(parents):
+            local = _zyx(values[frame, 3 + 3 * k: 6 + 3 * k])
+            if p < 0:
+                rot[k], pos[k] = local, values[frame, :3]
+            else:
+                rot[k], pos[k] = rot[p] @ local, pos[p] + rot[p] @ offsets[k]
+        order = [anim.names.index(n) for n in names]
+        np.testing.assert_allclose(np.array(pos), expected[frame][order], atol=1e-4)
+
+
+def _read_glb(path):
+    data = path.read_bytes()
+    magic, version, length = struct.unpack_from("<4sII", data)
+    assert (magic, version, length) == (b"glTF", 2, len(data))
+    json_len, json_type = struct.unpack_from("<I4s", data, 12)
+    assert json_type == b"JSON" and json_len % 4 == 0
+    doc = json.loads(data[20:20 + json_len])
+    bin_len, bin_type = struct.unpack_from("<I4s", data, 20 + json_len)
+    assert bin_type == b"BIN\0" and bin_len == doc["buffers"][0]["byteLength"]
+    return doc, data[28 + json_len: 28 + json_len + bin_len]
+
+
+def _accessor(doc, binary, index):
+    """Checks an accessor against its bufferView and the buffer, and returns its data."""
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype = {5126: np.float32, 5123: np.uint16, 5125: np.uint32}[acc["componentType"]]
+    width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[acc["type"]]
+    assert view["byteOffset"] % 4 == 0 and view["byteOffset"] + view["byteLength"] <= len(binary)
+    assert view["byteLength"] == acc["count"] * width * np.dtype(dtype).itemsize
+    array = np.frombuffer(binary, dtype, acc["count"] * width, view["byteOffset"]).reshape(acc["count"], width)
+    if "min" in acc:
+        np.testing.assert_allclose(acc["min"], array.min(axis=0), rtol=1e-6)
+        np.testing.assert_allclose(acc["max"], array.max(axis=0), rtol=1e-6)
+    return array
+
+
+def test_gltf_is_valid_and_skins_like_the_model(case, tmp_path):
+    model, params, motion = case
+    anim = animation(model, motion, focal_px=FOCAL)
+    doc, binary = _read_glb(write_gltf(tmp_path / "motion.glb", model, anim))
+    prim = doc["meshes"][0]["primitives"][0]
+    positions = _accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+    joints = _accessor(doc, binary, prim["attributes"]["JOINTS_0"])
+    weights = _accessor(doc, binary, prim["attributes"]["WEIGHTS_0"]).astype(np.float64)
+    faces = _accessor(doc, binary, prim["indices"]).reshape(-1, 3)
+    assert len(positions) == model.num_vertices and faces.max() < len(positions) and joints.max() < 55
+    np.testing.assert_allclose(weights.sum(axis=1), 1, atol=1e-6)
+    skin = doc["skins"][0]
+    assert skin["joints"] == list(range(55)) and doc["nodes"][55]["skin"] == 0
+    ibm = _accessor(doc, binary, skin["inverseBindMatrices"]).reshape(55, 4, 4).transpose(0, 2, 1)
+
+    sampled = {}
+    for channel in doc["animations"][0]["channels"]:
+        sampler = doc["animations"][0]["samplers"][channel["sampler"]]
+        times = _accessor(doc, binary, sampler["input"])[:, 0]
+        values = _accessor(doc, binary, sampler["output"])
+        assert len(times) == len(values) == T and times[-1] == pytest.approx((T - 1) / FPS)
+        sampled[(channel["target"]["node"], channel["target"]["path"])] = values.astype(np.float64)
+    assert len(sampled) == 56
+
+    vertices = np.asarray(FORWARD(model, params).vertices)
+    for frame in (0, 6):
+        world = [None] * 55
+        for j in range(55):  # parents come first in SMPL-X order
+            node = doc["nodes"][j]
+            local = np.eye(4)
+            local[:3, :3] = np.asarray(quat_to_rotmat(sampled[(j, "rotation")][frame][[3, 0, 1, 2]]))
+            local[:3, 3] = sampled[(0, "translation")][frame] if j == 0 else node["translation"]
+            parent = next((p for p, n in enumerate(doc["nodes"][:55]) if j in n.get("children", [])), None)
+            world[j] = local if parent is None else world[parent] @ local
+        mats = np.array(world) @ ibm
+        blended = np.einsum("vk,vkij->vij", weights, mats[joints.astype(int)])
+        skinned = np.einsum("vij,vj->vi", blended[:, :3, :3], positions) + blended[:, :3, 3]
+        np.testing.assert_allclose(skinned, _expected_world(vertices[frame], motion, frame), atol=2e-5)
+
+
+def test_export_command(case, tmp_path, capsys):
+    from jaxmocap.cli import main
+    from jaxmocap.io import file_sha256
+
+    _, _, motion = case
+    path = tmp_path / "motion.npz"
+    np.savez(path, **motion, model_sha256=np.array(file_sha256(smplx_jax.default_model_path())))
+    for name in ("motion.bvh", "motion.glb", "motion.gltf"):
+        fmt = "bvh" if name.endswith("bvh") else "gltf"
+        assert main(["export", str(path), "--format", fmt, "--out", str(tmp_path / name)]) == 0
+    assert (tmp_path / "motion.bvh").read_text().startswith("HIERARCHY")
+    assert json.loads((tmp_path / "motion.gltf").read_text())["buffers"][0]["uri"].startswith("data:")
+    capsys.readouterr()
+
+    np.savez(tmp_path / "other.npz", **motion, model_sha256=np.array("0" * 64))
+    np.savez(tmp_path / "partial.npz", **{k: v for k, v in motion.items() if k != "camera_scale"})
+    np.savez(tmp_path / "empty.npz", **(motion | {"valid": np.zeros(T, bool)}))
+    for bad, message in (("missing.npz", "not found"), ("other.npz", "another body model"),
+                         ("partial.npz", "lacks the motion key(s) camera_scale"), ("empty.npz", "no valid frame")):
+        assert main(["export", str(tmp_path / bad), "--format", "bvh", "--out", str(tmp_path / "x.bvh")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "x.bvh").exists()
