@@ -1,4 +1,4 @@
-"""Headless software rendering of meshes with OpenCV: painter's algorithm, Lambert shading, no OpenGL.
+"""Headless software rendering of meshes in numpy: vectorised rasterisation, flat Lambert shading, no OpenGL.
 
 Points are in the image's camera frame: x right and y down in pixels, z away from the viewer (any unit).
 """
@@ -9,23 +9,52 @@ import numpy as np
 _LIGHT = np.array([-0.35, -0.45, -0.82]) / np.linalg.norm([-0.35, -0.45, -0.82])  # towards the light: up-left-front
 
 
-def draw_mesh(image: np.ndarray, points: np.ndarray, faces: np.ndarray, color=(150, 175, 215)) -> np.ndarray:
-    """A copy of a BGR ``image`` with the mesh drawn over it.
+def rasterize(points: np.ndarray, faces: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """(height, width) index of the triangle seen at each pixel centre, -1 where none.
+
+    Front faces only (counter-clockwise seen from outside), drawn far to near by mean depth: the painter's
+    algorithm, evaluated for all covered pixels at once.
+    """
+    width, height = size
+    tri = points[faces].astype(np.float32)
+    xy = tri[:, :, :2] - 0.5  # pixel centres at integer coordinates
+    e1, e2 = xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]
+    area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # < 0: facing the viewer (y down)
+    lo = np.maximum(np.ceil(xy.min(axis=1)), 0).astype(np.int64)
+    hi = np.minimum(np.floor(xy.max(axis=1)), [width - 1, height - 1]).astype(np.int64)
+    keep = np.flatnonzero((area < 0) & np.all(hi >= lo, axis=1))
+    keep = keep[np.argsort(-tri[keep, :, 2].mean(axis=1), kind="stable")]
+    extent = hi[keep] - lo[keep] + 1
+    count = extent[:, 0] * extent[:, 1]
+    k = np.repeat(np.arange(len(keep)), count)  # candidate pixel -> triangle (in drawing order)
+    local = np.arange(len(k)) - (np.cumsum(count) - count)[k]
+    px = lo[keep, 0][k] + local % extent[k, 0]
+    py = lo[keep, 1][k] + local // extent[k, 0]
+    rx, ry = px - xy[keep, 0, 0][k], py - xy[keep, 0, 1][k]
+    d1, d2 = e1[keep] / area[keep, None], e2[keep] / area[keep, None]
+    w1 = rx * d2[k, 1] - ry * d2[k, 0]
+    w2 = ry * d1[k, 0] - rx * d1[k, 1]
+    inside = (w1 >= 0) & (w2 >= 0) & (w1 + w2 <= 1)
+    ids = np.full(height * width, -1, np.int64)
+    ids[(py * width + px)[inside]] = keep[k[inside]]  # later (nearer) triangles overwrite
+    return ids.reshape(height, width)
+
+
+def draw_mesh(image: np.ndarray, points: np.ndarray, faces: np.ndarray, color=(150, 175, 215),
+              opacity: float = 1.0) -> np.ndarray:
+    """A copy of a BGR ``image`` with the mesh drawn over it, flat-shaded by a light at the upper left front.
 
     ``points (V, 3)``: pixel x, pixel y, depth; ``faces (F, 3)`` counter-clockwise seen from outside.
     """
-    out = image.copy()
+    ids = rasterize(points, faces, (image.shape[1], image.shape[0]))
     tri = points[faces]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
-    normals = normals / np.where(lengths > 0, lengths, 1.0)[:, None]
-    keep = (normals[:, 2] < 0) & (lengths > 0)  # facing the viewer
-    order = np.argsort(-tri[keep, :, 2].mean(axis=1), kind="stable")  # far to near
-    shade = 0.3 + 0.7 * np.clip(normals[keep][order] @ _LIGHT, 0.0, 1.0)
-    polygons = np.round(tri[keep][order][:, :, :2] * 16).astype(np.int32)  # 4 bits of sub-pixel precision
-    colors = np.asarray(color, np.float64)[None] * shade[:, None]
-    for polygon, c in zip(polygons, colors):
-        cv2.fillConvexPoly(out, polygon, c.tolist(), lineType=cv2.LINE_AA, shift=4)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    shade = 0.3 + 0.7 * np.clip(normals @ _LIGHT, 0.0, 1.0)
+    covered = ids >= 0
+    out = image.copy()
+    mesh = shade[ids[covered], None] * np.asarray(color, np.float64)
+    out[covered] = np.clip(opacity * mesh + (1 - opacity) * out[covered], 0, 255).astype(np.uint8)
     return out
 
 
