@@ -58,7 +58,7 @@ def _parser() -> argparse.ArgumentParser:
     p.set_defaults(run=_cmd_demo)
 
     p = commands.add_parser("detect", help="2D keypoints (BODY_25 + hands) as OpenPose JSON, one file per frame")
-    p.add_argument("input", type=Path, help="video file, image folder or single image")
+    p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, required=True, help="output folder for the JSON files")
     p.add_argument("--overlay", action="store_true", help="also draw the skeletons (images or a video)")
     p.add_argument("--max-people", type=int, default=1, help="people per frame (default: %(default)s)")

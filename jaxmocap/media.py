@@ -1,0 +1,134 @@
+"""Frames from a video file, an image folder, a single image or a webcam, decoded in a background thread."""
+
+import queue
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from jaxmocap.errors import InputError
+
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".jp2", ".pgm", ".ppm", ".pnm"}
+
+
+class MediaError(InputError):
+    """The input cannot be read as a video, an image folder, an image or a webcam (the message names it)."""
+
+
+@dataclass(frozen=True)
+class Media:
+    """An opened input. ``kind``: ``video``, ``images``, ``image`` or ``webcam``; ``size`` (width, height) of the
+    first frame; ``frame_count`` after ``start``/``end``/``stride`` (None for a webcam); ``stems``: one name per
+    image for ``images``/``image``."""
+
+    kind: str
+    stem: str
+    fps: float
+    size: tuple[int, int]
+    frame_count: int | None
+    stems: tuple[str, ...] = ()
+
+
+def read_image(path) -> np.ndarray:
+    """An image file as OpenCV decodes it (any depth and channels), or `MediaError`."""
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        raise MediaError(f"cannot read image {path} (missing, empty or not an image format OpenCV can decode)")
+    return image
+
+
+def _capture(source) -> cv2.VideoCapture:
+    cap = cv2.VideoCapture(int(source)) if str(source).isdigit() else cv2.VideoCapture(str(source))
+    if not cap.isOpened():
+        what = f"webcam {source}" if str(source).isdigit() else f"{source} as a video or image"
+        raise MediaError(f"cannot open {what} (unsupported, corrupt or busy)")
+    return cap
+
+
+def _video(cap, start, end, stride) -> Iterator[tuple[int, np.ndarray]]:
+    index = 0
+    try:
+        while end is None or index < end:
+            ok, frame = cap.read()
+            if not ok or frame is None:
+                return
+            if index >= start and (index - start) % stride == 0:
+                yield index, frame
+            index += 1
+    finally:
+        cap.release()
+
+
+def _prefetch(frames: Iterator, depth: int = 8) -> Iterator:
+    """The same items, decoded ahead in a background thread (decoding overlaps the work on earlier frames)."""
+    items: queue.Queue = queue.Queue(maxsize=depth)
+    done, stop = object(), threading.Event()
+
+    def work():
+        try:
+            for item in frames:
+                while not stop.is_set():
+                    try:
+                        items.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            items.put(done)
+        except BaseException as err:  # handed to the consumer
+            items.put(err)
+
+    thread = threading.Thread(target=work, daemon=True)
+    thread.start()
+    try:
+        while (item := items.get()) is not done:
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+
+
+def open_media(source, start: int = 0, end: int | None = None, stride: int = 1) -> tuple[Media, Iterator]:
+    """The input's description and an iterator of ``(frame index, BGR-or-raw frame)`` over frames
+    ``start, start + stride, ... < end``. Video frames are decoded ahead in a background thread."""
+    if start < 0 or stride < 1 or (end is not None and end <= start):
+        raise MediaError(f"bad frame range start={start} end={end} stride={stride}")
+    if str(source).isdigit():
+        cap = _capture(source)
+        fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0) or 30.0
+        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        return Media("webcam", f"webcam{source}", fps / stride, size, None), _video(cap, start, end, stride)
+    path = Path(source)
+    if not path.exists():
+        raise MediaError(f"input {path} does not exist")
+    if path.is_dir() or path.suffix.lower() in IMAGE_SUFFIXES:
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if path.is_dir() else [path]
+        files = files[start:end:stride]
+        if not files:
+            raise MediaError(f"folder {path} holds no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in that range")
+        first = read_image(files[0])
+        kind = "images" if path.is_dir() else "image"
+        media = Media(kind, path.stem, 30.0, (first.shape[1], first.shape[0]), len(files), tuple(f.stem for f in files))
+        return media, ((start + i * stride, read_image(f)) for i, f in enumerate(files))
+
+    cap = _capture(path)
+    total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+    fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0) or 30.0
+    frames = _video(cap, start, end, stride)
+    first = next(frames, None)
+    if first is None:
+        raise MediaError(f"video {path} has no readable frames" + (f" from frame {start}" if start else ""))
+    last = min(total, end) if end is not None and total else (end or total)
+    count = len(range(start, last, stride)) if last else None
+    size = (first[1].shape[1], first[1].shape[0])
+
+    def chained():
+        yield first
+        yield from frames
+
+    return Media("video", path.stem, fps / stride, size, count), _prefetch(chained())
