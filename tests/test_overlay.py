@@ -1,0 +1,55 @@
+"""The overlay video: frame count, size, and the mesh drawn where the camera puts it."""
+
+from pathlib import Path
+
+import cv2
+import jax
+import numpy as np
+from conftest import load
+
+import smplx_jax
+from jaxmocap.overlay import OverlayWriter, mesh_over_frame
+from jaxmocap.poses import example_pose
+
+CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+
+
+def _posed(model):
+    flip = np.array([np.pi, 0.0, 0.0], np.float32)  # y up to the image's y down
+    params = example_pose().replace(global_orient=flip)
+    out = jax.jit(smplx_jax.forward)(model, params)
+    return np.asarray(out.vertices), np.asarray(out.joints)
+
+
+def test_mesh_lands_on_its_projection(default_model_dir):
+    model = load(default_model_dir)
+    vertices, joints = _posed(model)
+    frame = np.zeros((400, 300, 3), np.uint8)
+    scale, trans = 150.0, np.array([150.0, 180.0])
+    drawn = mesh_over_frame(frame, vertices, np.asarray(model.faces), scale, trans)
+    head = np.round(joints[15, :2] * scale + trans).astype(int)  # the head joint is inside the mesh
+    assert drawn[head[1], head[0]].max() > 0
+    assert drawn[5, 5].max() == 0  # far from the body nothing is drawn
+    box = vertices[:, :2] * scale + trans
+    covered = np.argwhere(drawn.max(axis=2) > 0)
+    assert covered[:, 1].min() >= box[:, 0].min() - 2 and covered[:, 0].max() <= box[:, 1].max() + 2
+
+
+def test_overlay_video_frames_and_size(default_model_dir, tmp_path):
+    model = load(default_model_dir)
+    vertices, _ = _posed(model)
+    cap = cv2.VideoCapture(str(CLIP))
+    path = tmp_path / "overlay.mp4"
+    with OverlayWriter(path, (1080, 1920), fps=30.0) as writer:
+        for k in range(5):
+            ok, frame = cap.read()
+            assert ok
+            if k == 2:
+                writer.write(frame)  # a frame without a person
+            else:
+                writer.write(frame, vertices, np.asarray(model.faces), 700.0, np.array([540.0, 900.0]))
+    video = cv2.VideoCapture(str(path))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
+    ok, first = video.read()
+    assert ok and first.shape == (960, 1080, 3)
+    cv2.imwrite(str(tmp_path / "first.png"), first)
