@@ -12,6 +12,8 @@ from params_util import random_params
 import smplx_jax
 from jaxmocap.export import animation, global_transforms, write_bvh, write_gltf
 from jaxmocap.export.animation import CAMERA_TO_WORLD
+from jaxmocap.io import file_sha256
+from jaxmocap.motion import write_motion
 from smplx_jax.rotations import quat_to_rotmat, rotvec_to_rotmat
 
 T, FPS, SIZE, FOCAL = 12, 25.0, (1000.0, 800.0), 1200.0
@@ -33,7 +35,9 @@ def case(default_model_dir):
     motion = {k: np.asarray(getattr(params, k)) for k in
               ("global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "betas", "transl")}
     motion |= {"camera_scale": rng.uniform(250, 350, T), "camera_trans": rng.uniform(300, 600, (T, 2)),
-               "valid": np.arange(T) != 3, "fps": np.array(FPS), "image_size": np.array(SIZE)}
+               "valid": np.arange(T) != 3, "fps": np.array(FPS), "image_size": np.array(SIZE),
+               "keypoints_2d": np.zeros((T, 67, 3)), "reprojection_error_px": np.zeros(T),
+               "model_sha256": np.array(file_sha256(smplx_jax.default_model_path()))}
     return model, params, motion
 
 
@@ -176,11 +180,9 @@ def test_gltf_is_valid_and_skins_like_the_model(case, tmp_path):
 
 def test_export_command(case, tmp_path, capsys):
     from jaxmocap.cli import main
-    from jaxmocap.io import file_sha256
 
     _, _, motion = case
-    path = tmp_path / "motion.npz"
-    np.savez(path, **motion, model_sha256=np.array(file_sha256(smplx_jax.default_model_path())))
+    path = write_motion(tmp_path / "motion.npz", motion)
     for name in ("motion.bvh", "motion.glb", "motion.gltf"):
         fmt = "bvh" if name.endswith("bvh") else "gltf"
         assert main(["export", str(path), "--format", fmt, "--out", str(tmp_path / name)]) == 0
@@ -188,7 +190,7 @@ def test_export_command(case, tmp_path, capsys):
     assert json.loads((tmp_path / "motion.gltf").read_text())["buffers"][0]["uri"].startswith("data:")
     capsys.readouterr()
 
-    np.savez(tmp_path / "other.npz", **motion, model_sha256=np.array("0" * 64))
+    np.savez(tmp_path / "other.npz", **(motion | {"model_sha256": np.array("0" * 64)}))
     np.savez(tmp_path / "partial.npz", **{k: v for k, v in motion.items() if k != "camera_scale"})
     np.savez(tmp_path / "empty.npz", **(motion | {"valid": np.zeros(T, bool)}))
     for bad, message in (("missing.npz", "not found"), ("other.npz", "another body model"),

@@ -2,7 +2,7 @@
 
 from jaxmocap.export.animation import Animation, animation, global_transforms
 from jaxmocap.export.bvh import write_bvh
-from jaxmocap.export.files import export_motion, read_motion
+from jaxmocap.export.files import export_motion
 from jaxmocap.export.gltf import write_gltf
 
-__all__ = ["Animation", "animation", "export_motion", "global_transforms", "read_motion", "write_bvh", "write_gltf"]
+__all__ = ["Animation", "animation", "export_motion", "global_transforms", "write_bvh", "write_gltf"]

@@ -15,7 +15,6 @@ from smplx_jax import constants
 from smplx_jax.rotations import rotvec_to_rotmat
 
 CAMERA_TO_WORLD = np.diag([1.0, -1.0, -1.0])
-POSE_KEYS = ("global_orient", "body_pose", "jaw_pose", "left_hand_pose", "right_hand_pose")
 
 
 @dataclass(frozen=True)

@@ -1,43 +1,24 @@
 """``jaxmocap export``: a motion file to BVH or glTF."""
 
 import sys
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 import smplx_jax
 from jaxmocap.errors import InputError
-from jaxmocap.export.animation import POSE_KEYS, animation
+from jaxmocap.export.animation import animation
 from jaxmocap.export.bvh import write_bvh
 from jaxmocap.export.gltf import write_gltf
 from jaxmocap.io import file_sha256
-
-MOTION_KEYS = POSE_KEYS + ("betas", "transl", "camera_scale", "camera_trans", "valid", "fps", "image_size")
-
-
-def read_motion(path) -> dict[str, np.ndarray]:
-    """The arrays of a ``motion.npz`` needed for export, or `InputError` naming the problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"motion file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in MOTION_KEYS if k not in data.files]
-            if missing:
-                raise InputError(f"{path} lacks the motion key(s) {', '.join(missing)}; is it a jaxmocap motion.npz?")
-            motion = {k: data[k] for k in data.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        raise InputError(f"{path} is not a readable motion .npz ({err})") from None
-    if not np.asarray(motion["valid"]).any():
-        raise InputError(f"{path} holds no valid frame to export")
-    return motion
-
+from jaxmocap.motion import read_motion
 
 def export_motion(motion_path, fmt: str, out, model_path=None, focal_px: float | None = None) -> Path:
     """Write ``out`` in ``fmt`` (``bvh`` or ``gltf``) from a motion file and its body model (default model when
     ``model_path`` is None; it must be the file the motion was made with)."""
     motion = read_motion(motion_path)
+    if not motion["valid"].any():
+        raise InputError(f"{motion_path} holds no valid frame to export")
     path = Path(model_path) if model_path else smplx_jax.default_model_path()
     recorded = str(motion.get("model_sha256", ""))
     if recorded and recorded != file_sha256(path):

@@ -1,0 +1,63 @@
+"""``motion.npz``: one tracked person over ``T`` frames (DESIGN 2.3), checked on write and on read.
+
+With ``X = smplx_forward(params).joints`` (``transl`` included) the pixel of a joint in frame ``t`` is
+``camera_scale[t] * X[..., :2] + camera_trans[t]`` (x right, y down). Hand poses are absolute.
+"""
+
+import io
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from jaxmocap.errors import InputError
+from jaxmocap.io import atomic_write_bytes
+
+# key -> shape after the frame axis ("B": num_betas), or None for a scalar
+MOTION_SHAPES = {
+    "global_orient": (3,), "body_pose": (21, 3), "left_hand_pose": (15, 3), "right_hand_pose": (15, 3),
+    "jaw_pose": (3,), "betas": ("B",), "transl": (3,), "camera_scale": (), "camera_trans": (2,), "valid": (),
+    "keypoints_2d": (67, 3), "reprojection_error_px": (), "fps": None, "image_size": None, "model_sha256": None,
+}
+
+
+def _check(motion: dict, where: str) -> None:
+    missing = [k for k in MOTION_SHAPES if k not in motion]
+    if missing:
+        raise InputError(f"{where} lacks the motion key(s) {', '.join(missing)}; is it a jaxmocap motion.npz?")
+    frames = len(np.asarray(motion["valid"]))
+    num_betas = np.shape(motion["betas"])[-1] if np.ndim(motion["betas"]) == 2 else -1
+    for key, shape in MOTION_SHAPES.items():
+        actual = np.shape(motion[key])
+        expected = (2,) if key == "image_size" else () if shape is None else (frames,) + tuple(
+            num_betas if s == "B" else s for s in shape)
+        if actual != expected:
+            raise InputError(f"{where}: key {key!r} has shape {actual}, expected {expected}")
+
+
+def write_motion(path, motion: dict) -> Path:
+    """Check the arrays and write them atomically as ``.npz`` (float32 parameters)."""
+    _check(motion, str(path))
+    arrays = {}
+    for key, value in motion.items():
+        value = np.asarray(value)
+        arrays[key] = value.astype(np.float32) if value.dtype == np.float64 and key not in ("fps",) else value
+    arrays["valid"] = np.asarray(motion["valid"], bool)
+    arrays["model_sha256"] = np.asarray(str(motion["model_sha256"]))
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def read_motion(path) -> dict[str, np.ndarray]:
+    """The arrays of a ``motion.npz``, or `InputError` naming the problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"motion file not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            motion = {k: data[k] for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
+        raise InputError(f"{path} is not a readable motion .npz ({err})") from None
+    _check(motion, str(path))
+    return motion
