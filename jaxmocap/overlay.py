@@ -32,7 +32,7 @@ def side_view(vertices: np.ndarray, faces: np.ndarray, size: tuple[int, int], pi
 
 class OverlayWriter:
     """Writes the side-by-side overlay video (``mp4v``), the frames scaled so that the height is at most
-    ``max_height``; the side view keeps the first frame's framing so the motion reads."""
+    ``max_height``; the side view keeps the first frame's scale and follows the body's centre."""
 
     def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, max_height: int = 960):
         width, height = frame_size
@@ -43,7 +43,7 @@ class OverlayWriter:
                                       (2 * self.panel[0], self.panel[1]))
         if not self.writer.isOpened():
             raise OSError(f"cannot write the overlay video {self.path}")
-        self.framing = None
+        self.pixels_per_metre = None
 
     def write(self, frame, vertices=None, faces=None, camera_scale=None, camera_trans=None) -> None:
         """One frame; without vertices (no person) the frame is shown as it is beside an empty side view."""
@@ -53,10 +53,10 @@ class OverlayWriter:
         else:
             left = cv2.resize(mesh_over_frame(frame, vertices, faces, camera_scale, camera_trans, self.scale),
                               self.panel)
-            if self.framing is None:
-                lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-                self.framing = (0.8 * self.panel[1] / (hi - lo).max(), (lo + hi) / 2)
-            right = side_view(vertices, faces, self.panel, *self.framing)
+            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+            if self.pixels_per_metre is None:
+                self.pixels_per_metre = 0.75 * self.panel[1] / (hi - lo).max()
+            right = side_view(vertices, faces, self.panel, self.pixels_per_metre, (lo + hi) / 2)
         self.writer.write(np.concatenate([left, right], axis=1))
 
     def close(self) -> None:
