@@ -1,0 +1,120 @@
+"""Our weights format: ``DIR/regressors.json`` (architecture, files, checksums) beside ``hand.npz`` and
+``body.npz`` (one array per variable, named like the PyTorch checkpoints, read with ``allow_pickle=False``)."""
+
+import dataclasses
+import hashlib
+import json
+import zipfile
+from pathlib import Path
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+from flax import nnx
+
+from jaxmocap.errors import InputError
+from jaxmocap.regressors.body import BodyConfig, BodyRegressor
+from jaxmocap.regressors.hand import HandConfig, HandRegressor
+
+FORMAT, VERSION, INDEX = "jaxmocap-regressors", 1, "regressors.json"
+_KINDS = {"hand": (HandRegressor, HandConfig), "body": (BodyRegressor, BodyConfig)}
+
+
+class WeightsError(InputError):
+    """A checkpoint or weights folder that is missing, corrupt, or not the expected network."""
+
+
+class Regressors(NamedTuple):
+    hand: HandRegressor
+    body: BodyRegressor
+
+
+def variable_names(module: nnx.Module) -> dict[str, tuple[int, ...]]:
+    """``{"encoder.layer1.0.conv1.kernel": shape, ...}``: every variable of a network (abstract is fine)."""
+    _, state = nnx.split(module)
+    return {".".join(map(str, path)): tuple(v.shape) for path, v in nnx.to_flat_state(state)}
+
+
+def build(kind: str, config, arrays: dict[str, np.ndarray], source: str, *, dtype=None) -> nnx.Module:
+    """A network of ``kind`` ("hand"/"body") with exactly these arrays; `WeightsError` names what is off."""
+    cls, _ = _KINDS[kind]
+    graphdef, state = nnx.split(nnx.eval_shape(lambda: cls(config, dtype=dtype, rngs=nnx.Rngs(0))))
+    flat = nnx.to_flat_state(state)
+    expected = {".".join(map(str, path)): tuple(v.shape) for path, v in flat}
+    missing, unexpected = sorted(set(expected) - set(arrays)), sorted(set(arrays) - set(expected))
+    if missing or unexpected:
+        raise WeightsError(f"{source}: not the {kind} network: "
+                           + "; ".join(f"{what} {_few(keys)}" for what, keys in
+                                       (("missing", missing), ("unexpected", unexpected)) if keys))
+    for name, shape in expected.items():
+        if tuple(arrays[name].shape) != shape:
+            raise WeightsError(f"{source}: {kind} variable {name} has shape {tuple(arrays[name].shape)}, "
+                               f"expected {shape}")
+    leaves = [(path, v.replace(jnp.asarray(arrays[".".join(map(str, path))], jnp.float32))) for path, v in flat]
+    return nnx.merge(graphdef, nnx.from_flat_state(leaves))
+
+
+def save(out_dir: Path, regressors: Regressors, sources: dict[str, str]) -> list[Path]:
+    """Write both networks and the index; returns the files written."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    index = dict(format=FORMAT, version=VERSION)
+    written = []
+    for kind, module in regressors._asdict().items():
+        _, state = nnx.split(module)
+        arrays = {".".join(map(str, p)): np.asarray(v[...], np.float32) for p, v in nnx.to_flat_state(state)}
+        path = out_dir / f"{kind}.npz"
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **arrays)
+        tmp.replace(path)
+        index[kind] = dict(file=path.name, sha256=_sha256(path), config=dataclasses.asdict(module.config),
+                           source=sources.get(kind, ""))
+        written.append(path)
+    (out_dir / INDEX).write_text(json.dumps(index, indent=2) + "\n")
+    return written + [out_dir / INDEX]
+
+
+def load(directory: str | Path, *, dtype=None) -> Regressors:
+    """The two networks from a folder written by ``jaxmocap convert-frankmocap``.
+
+    ``dtype`` is the compute dtype (e.g. ``jnp.bfloat16``); weights stay float32.
+    """
+    directory = Path(directory)
+    index_path = directory / INDEX
+    if not index_path.is_file():
+        raise WeightsError(f"{directory}: no {INDEX}; create the folder with "
+                           "`jaxmocap convert-frankmocap --hand ... --hand-mean ... --body ... --out DIR`")
+    try:
+        index = json.loads(index_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise WeightsError(f"{index_path}: not valid JSON ({err})") from None
+    if index.get("format") != FORMAT or index.get("version") != VERSION:
+        raise WeightsError(f"{index_path}: expected format {FORMAT} version {VERSION}, "
+                           f"got {index.get('format')} version {index.get('version')}")
+    modules = {}
+    for kind, (_, config_cls) in _KINDS.items():
+        entry = index.get(kind)
+        if not isinstance(entry, dict) or not {"file", "sha256", "config"} <= set(entry):
+            raise WeightsError(f"{index_path}: no complete '{kind}' entry (file, sha256, config)")
+        try:
+            config = config_cls(**entry["config"])
+        except TypeError as err:
+            raise WeightsError(f"{index_path}: bad '{kind}' config ({err})") from None
+        path = directory / str(entry["file"])
+        if not path.is_file() or _sha256(path) != entry["sha256"]:
+            raise WeightsError(f"{path}: missing or does not match the checksum in {INDEX}")
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                arrays = {name: npz[name] for name in npz.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+            raise WeightsError(f"{path}: cannot read ({err})") from None
+        modules[kind] = build(kind, config, arrays, str(path), dtype=dtype)
+    return Regressors(**modules)
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _few(keys: list[str], n: int = 4) -> str:
+    return ", ".join(keys[:n]) + (f" (+{len(keys) - n} more)" if len(keys) > n else "")
