@@ -1,6 +1,9 @@
 """FrankMocap's two regressors as plain PyTorch modules (torchvision is not needed), with the module names of
 the released checkpoints, so ``state_dict()`` has their keys. Used only to check our networks and importer."""
 
+import pickle
+from pathlib import Path
+
 import numpy as np
 import torch
 from torch import nn
@@ -179,3 +182,20 @@ def hand_crop(img, box_xywh, res=224):
     canvas = np.zeros((size, size, 3), np.uint8)
     canvas[:max_y - min_y, :max_x - min_x] = img[min_y:max_y, min_x:max_x]
     return cv2.resize(canvas, (res, res)), res / size, np.array([min_x, min_y])
+
+
+def write_checkpoints(root, seed: int = 0):
+    """Random reference networks saved as FrankMocap ships them: ``pose_shape_best.pth`` (hand state_dict),
+    ``body.pt`` (``{'model': state_dict}``) and ``mean_mano_params.pkl``; returns the (hand, body) modules."""
+    root = Path(root)
+    rng = np.random.default_rng(seed)
+    mean_pose = rng.normal(0, 0.3, 48).astype(np.float32)
+    with open(root / "mean_mano_params.pkl", "wb") as f:
+        pickle.dump({"mean_pose": mean_pose, "mean_betas": np.zeros(10, np.float32)}, f)
+    mean = np.concatenate([[5, 0, 0, 0, 0, 0], mean_pose[3:], np.zeros(10)]).astype(np.float32)
+    hand = randomize(HandNet(mean), seed=seed + 1)
+    body = randomize(HMR(np.tile([1.0, 0, 0, 1, 0, 0], 24) + rng.normal(0, 0.1, 144),
+                         rng.normal(0, 1, 10), [0.9, 0.0, 0.0]), seed=seed + 2)
+    torch.save(hand.state_dict(), root / "pose_shape_best.pth")
+    torch.save({"model": body.state_dict(), "epoch": 7}, root / "body.pt")
+    return hand, body

@@ -2,7 +2,6 @@
 against FrankMocap's (transcribed) preprocessing, batching, and the importer's errors."""
 
 import json
-import pickle
 
 import jax
 import numpy as np
@@ -24,17 +23,7 @@ TOL = 1e-4
 def checkpoints(tmp_path_factory):
     """FrankMocap-format files of random reference networks (hand .pth state_dict, {'model': ...} body .pt)."""
     root = tmp_path_factory.mktemp("frankmocap")
-    rng = np.random.default_rng(0)
-    mean_pose = rng.normal(0, 0.3, 48).astype(np.float32)
-    with open(root / "mean_mano_params.pkl", "wb") as f:
-        pickle.dump({"mean_pose": mean_pose, "mean_betas": np.zeros(10, np.float32)}, f)
-    mean = np.concatenate([[5, 0, 0, 0, 0, 0], mean_pose[3:], np.zeros(10)]).astype(np.float32)
-    hand = ref.randomize(ref.HandNet(mean), seed=1)
-    body = ref.randomize(ref.HMR(np.tile([1.0, 0, 0, 1, 0, 0], 24) + rng.normal(0, 0.1, 144),
-                                 rng.normal(0, 1, 10), [0.9, 0.0, 0.0]), seed=2)
-    torch.save(hand.state_dict(), root / "pose_shape_best.pth")
-    torch.save({"model": body.state_dict(), "epoch": 7}, root / "body.pt")
-    return root, hand, body
+    return (root,) + ref.write_checkpoints(root)
 
 
 def _convert(root, out, hand="pose_shape_best.pth", body="body.pt", mean="mean_mano_params.pkl"):
