@@ -12,13 +12,37 @@ def _cmd_model(args):
 
     write_default_model(args.out)
     print(f"wrote the default body model to {args.out}")
+    if args.render:
+        from jaxmocap.demo import render_body_model
+
+        for path in render_body_model(args.out, args.render):
+            print(f"wrote {path}")
+
+
+def _print_report(report):
+    seconds = dict(report.seconds)
+    total = sum(seconds.values())
+    stages = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items())
+    print(f"{report.frames} frames ({report.valid} with a person) in {total:.1f} s "
+          f"({report.frames / max(total, 1e-9):.1f} frames/s): {stages}")
+    for path in report.written:
+        print(f"wrote {path}")
+
+
+def _cmd_run(args):
+    from jaxmocap.pipeline import run
+
+    exports = tuple(f for f in args.export.split(",") if f) if args.export else ()
+    _print_report(run(args.input, args.out, model_path=args.model, weights=args.weights, integration=args.integration,
+                      start=args.start, end=args.end, stride=args.stride,
+                      chunk_size=args.chunk, iterations=args.iterations, smooth=not args.no_smooth,
+                      overlay=not args.no_overlay, exports=exports, progress=not args.quiet))
 
 
 def _cmd_demo(args):
-    from jaxmocap.demo import body_model_demo
+    from jaxmocap.demo import demo
 
-    for path in body_model_demo(args.out):
-        print(f"wrote {path}")
+    _print_report(demo(args.out))
 
 
 def _cmd_detect(args):
@@ -27,6 +51,15 @@ def _cmd_detect(args):
     written = detect_media(args.input, args.out, overlay=args.overlay, progress=not args.quiet,
                            max_people=args.max_people, model_dir=args.models, hands=not args.no_hands)
     print(f"wrote {len(written)} OpenPose JSON file(s) to {args.out}")
+
+
+def _cmd_fit(args):
+    from jaxmocap.integrate.folder import fit_keypoint_folder
+
+    path = fit_keypoint_folder(args.keypoints, args.out, model_path=args.model, iterations=args.iterations,
+                               init=args.init, smooth=args.smooth, image_size=args.image_size, fps=args.fps,
+                               progress=not args.quiet)
+    print(f"wrote {path}")
 
 
 def _cmd_export(args):
@@ -53,9 +86,27 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="jaxmocap", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
 
-    p = commands.add_parser("demo", help="the body model, posed and rendered (the video demo comes with the pipeline)")
+    p = commands.add_parser("demo", help="the main job on the bundled sample clip: motion, overlay video, exports")
     p.add_argument("--out", type=Path, default=Path("jaxmocap_demo"), help="output folder (default: %(default)s)")
     p.set_defaults(run=_cmd_demo)
+
+    p = commands.add_parser("run", help="video, image folder, image or webcam -> DIR/motion.npz, overlay, exports")
+    p.add_argument("input", help="video file, image folder, single image or webcam index")
+    p.add_argument("--out", type=Path, default=Path("jaxmocap_out"), help="output folder (default: %(default)s)")
+    p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
+    p.add_argument("--weights", type=Path, default=None, help="FrankMocap regressors from convert-frankmocap")
+    p.add_argument("--integration", choices=("optimize", "copy-paste"), default="optimize",
+                   help="how body and hands are merged (copy-paste needs --weights; default: %(default)s)")
+    p.add_argument("--start", type=int, default=0, help="first frame (default: 0)")
+    p.add_argument("--end", type=int, default=None, help="stop before this frame")
+    p.add_argument("--stride", type=int, default=1, help="use every n-th frame (default: 1)")
+    p.add_argument("--export", default="", help="comma-separated: bvh,gltf")
+    p.add_argument("--iterations", type=int, default=20, help="fit iterations (default: %(default)s)")
+    p.add_argument("--chunk", type=int, default=128, help="frames per resumable chunk (default: %(default)s)")
+    p.add_argument("--no-smooth", action="store_true", help="no temporal smoothing")
+    p.add_argument("--no-overlay", action="store_true", help="no overlay video")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(run=_cmd_run)
 
     p = commands.add_parser("detect", help="2D keypoints (BODY_25 + hands) as OpenPose JSON, one file per frame")
     p.add_argument("input", help="video file, image folder, single image or webcam index")
@@ -67,6 +118,19 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_detect)
 
+    p = commands.add_parser("fit", help="fit SMPL-X to OpenPose JSON keypoints alone -> DIR/motion.npz")
+    p.add_argument("keypoints", type=Path, help="folder of OpenPose JSON files, one per frame (sorted by name)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
+    p.add_argument("--iterations", type=int, default=20, help="Levenberg-Marquardt iterations (default: %(default)s)")
+    p.add_argument("--init", type=Path, default=None, help="motion.npz to start from (same frames)")
+    p.add_argument("--smooth", action="store_true", help="temporal smoothing, kernel [0.1, 0.2, 0.5, 0.2, 0.1]")
+    p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None,
+                   help="image size in pixels (OpenPose JSON has none; default: inferred from the keypoints)")
+    p.add_argument("--fps", type=float, default=30.0, help="frame rate stored in motion.npz (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=_cmd_fit)
+
     p = commands.add_parser("export", help="a motion.npz as BVH (skeleton) or glTF 2.0 (skinned mesh) animation")
     p.add_argument("motion", type=Path, help="motion.npz")
     p.add_argument("--format", choices=("bvh", "gltf"), required=True)
@@ -77,6 +141,7 @@ def _parser() -> argparse.ArgumentParser:
 
     p = commands.add_parser("model", help="write the license-free default body model as an SMPL-X .npz")
     p.add_argument("--out", type=Path, required=True, help="file to write, e.g. models/smplx/SMPLX_NEUTRAL.npz")
+    p.add_argument("--render", type=Path, default=None, help="also render it (rest and example pose) into this folder")
     p.set_defaults(run=_cmd_model)
 
     p = commands.add_parser("convert-frankmocap", help="FrankMocap's PyTorch checkpoints -> our weights (needs torch)")
@@ -104,7 +169,8 @@ def main(argv=None) -> int:
         print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"jaxmocap {args.command}: interrupted", file=sys.stderr)
+        resume = "; run the same command again to resume" if args.command in ("run", "demo") else ""
+        print(f"jaxmocap {args.command}: interrupted{resume}", file=sys.stderr)
         return 130
     return 0
 

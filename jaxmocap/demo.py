@@ -1,5 +1,4 @@
-"""``jaxmocap demo``: the default body model in its rest pose and an example pose, rendered front and side,
-with close-ups of the face and the right hand."""
+"""``jaxmocap demo``: the main job on the bundled sample clip; and renders of a body model for a person to check."""
 
 from pathlib import Path
 
@@ -10,7 +9,8 @@ import numpy as np
 import smplx_jax
 from jaxmocap.poses import example_pose
 from jaxmocap.render import draw_mesh, label, view_points
-from smplx_jax.default_model import default_model_path
+
+DEMO_CLIP = Path(__file__).parent / "data" / "pose2sim_single_cam01.mp4"
 
 
 def _view(vertices, faces, size, caption, **view):
@@ -37,13 +37,20 @@ def body_model_sheets(model: smplx_jax.BodyModel) -> dict[str, np.ndarray]:
             "face": np.concatenate(face, axis=1), "hand": np.concatenate(palm, axis=1)}
 
 
-def body_model_demo(out_dir: Path) -> list[Path]:
+def render_body_model(model_path: Path, out_dir: Path) -> list[Path]:
+    """PNG sheets of a body model file: rest and example pose front and side, face and hand close-ups."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    model = smplx_jax.load_model(default_model_path())
     written = []
-    for name, image in body_model_sheets(model).items():
+    for name, image in body_model_sheets(smplx_jax.load_model(model_path)).items():
         path = out_dir / f"body_model{'' if name == 'body' else '_' + name}.png"
         if not cv2.imwrite(str(path), image):
             raise PermissionError(f"cannot write {path}")
         written.append(path)
     return written
+
+
+def demo(out_dir: Path):
+    """The main job on the bundled Pose2Sim clip, with both exports."""
+    from jaxmocap.pipeline import run
+
+    return run(DEMO_CLIP, out_dir, exports=("bvh", "gltf"))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+import smplx_jax
 from jaxmocap.errors import InputError
 from jaxmocap.io import atomic_write_bytes
 
@@ -61,3 +62,14 @@ def read_motion(path) -> dict[str, np.ndarray]:
         raise InputError(f"{path} is not a readable motion .npz ({err})") from None
     _check(motion, str(path))
     return motion
+
+
+def motion_params(motion: dict, num_expression: int = 10, frames=slice(None)) -> smplx_jax.SMPLXParams:
+    """The motion's bodies (``frames`` of them) as batched `smplx_jax.SMPLXParams`; eyes at rest, no expression
+    (motion.npz keeps neither)."""
+    f = lambda k: np.asarray(motion[k][frames], np.float32)  # noqa: E731
+    t = len(f("valid"))
+    zeros = np.zeros((t, 3), np.float32)
+    return smplx_jax.SMPLXParams(f("global_orient"), f("body_pose"), f("left_hand_pose"), f("right_hand_pose"),
+                                 f("jaw_pose"), zeros, zeros, f("betas"), np.zeros((t, num_expression), np.float32),
+                                 f("transl"))

@@ -22,9 +22,10 @@ def test_model_command_writes_a_file_smplx_loads(tmp_path, capsys):
     assert smplx_jax.load_model(out).num_vertices == 10475
 
 
-def test_demo_writes_the_rendered_body_model(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path)]) == 0
-    image = cv2.imread(str(tmp_path / "body_model.png"))
+def test_model_render_writes_the_body_model_sheets(tmp_path, capsys):
+    out = tmp_path / "SMPLX_NEUTRAL.npz"
+    assert main(["model", "--out", str(out), "--render", str(tmp_path / "renders")]) == 0
+    image = cv2.imread(str(tmp_path / "renders" / "body_model.png"))
     assert image is not None and image.shape == (1280, 960, 3)
     # the figure is drawn: plenty of non-white pixels in each of the four views
     for row in (image[:640], image[640:]):
@@ -33,8 +34,8 @@ def test_demo_writes_the_rendered_body_model(tmp_path, capsys):
     printed = capsys.readouterr().out
     for name, shape in (("body_model", (1280, 960, 3)), ("body_model_face", (450, 1800, 3)),
                         ("body_model_hand", (450, 1800, 3))):
-        assert str(tmp_path / f"{name}.png") in printed
-        assert cv2.imread(str(tmp_path / f"{name}.png")).shape == shape
+        assert str(tmp_path / "renders" / f"{name}.png") in printed
+        assert cv2.imread(str(tmp_path / "renders" / f"{name}.png")).shape == shape
 
 
 def test_bad_model_path_is_one_line_and_nonzero(tmp_path):

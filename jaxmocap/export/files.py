@@ -3,7 +3,6 @@
 import sys
 from pathlib import Path
 
-import numpy as np
 
 import smplx_jax
 from jaxmocap.errors import InputError

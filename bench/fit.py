@@ -1,0 +1,175 @@
+"""Optimization integration speed: frames/s of the 20-iteration fit (`jaxmocap.integrate.fit`) over 256 and 1024
+frames and its final reprojection error, against a PyTorch baseline on the same objective, data, start and
+threads: the ``smplx`` package + ``torch.optim.LBFGS`` (strong Wolfe line search, 20 iterations) and Adam (20 steps).
+
+    python bench/fit.py [--out bench/results] [--quick]      (or: jaxmocap bench --only fit)
+
+Data: synthetic frames with known answers (random plausible whole-body poses, both hands, 2 px noise, 15% of
+keypoints dropped, a start perturbed from the truth: `jaxmocap.integrate.synthetic`), default body model.
+The objective is the fit's: Cauchy-robust confidence-weighted reprojection of the 67 OpenPose keypoints + the
+same priors (pose near the start, shape L2, elbow/knee bending limits). For PyTorch the camera is parametrised as
+``scale0 * exp(a)`` and ``trans0 + scale0 * b`` and the cost divided by ``scale0^2`` so that all unknowns are
+O(1). The camera start is the same for both (fitted to the start pose's keypoints). --quick: PyTorch at 256 only.
+"""
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
+    import smplx
+    import torch
+
+    from jaxmocap.integrate.solver import BEND_LIMITS
+    from smplx_jax import constants
+
+    torch.set_num_threads(threads)
+    init = problem.init
+    b = init.betas.shape[0]
+    body = smplx.create(str(model_dir), model_type="smplx", use_pca=False, flat_hand_mean=True, batch_size=b)
+    t = lambda a: torch.tensor(np.asarray(a), dtype=torch.float32).reshape(b, -1)  # noqa: E731
+    start = dict(global_orient=t(init.global_orient), body_pose=t(init.body_pose),
+                 left_hand_pose=t(init.left_hand_pose), right_hand_pose=t(init.right_hand_pose), betas=t(init.betas))
+    var = {k: v.clone().requires_grad_(True) for k, v in start.items()}
+    log_s = torch.zeros(b, requires_grad=True)
+    d_t = torch.zeros(b, 2, requires_grad=True)
+    s0 = torch.tensor(np.asarray(cam0[:, 0]))
+    t0 = torch.tensor(np.asarray(cam0[:, 1:]))
+    kp = torch.tensor(problem.keypoints)
+    conf = kp[..., 2]
+    index = list(constants.OPENPOSE67_FROM_SMPLX)
+    sigma2 = (config.robust_scale * s0) ** 2
+    prior = {"global_orient": config.prior_global, "body_pose": config.prior_body,
+             "left_hand_pose": config.prior_hand, "right_hand_pose": config.prior_hand}
+    jaw = torch.zeros(b, 3)
+
+    def cost():
+        out = body(**var, jaw_pose=jaw, return_verts=True)
+        x = out.joints[:, index, :2]
+        pix = (s0 * torch.exp(log_s))[:, None, None] * x + (t0 + s0[:, None] * d_t)[:, None, :]
+        r2 = ((pix - kp[..., :2]) ** 2).sum(-1)
+        data = (conf * sigma2[:, None] * torch.log1p(r2 / sigma2[:, None])).sum(1)
+        reg = sum((s0 * w) ** 2 * ((var[k] - start[k]) ** 2).sum(1) for k, w in prior.items())
+        reg = reg + (s0 * config.prior_betas) ** 2 * (var["betas"] ** 2).sum(1)
+        pose = var["body_pose"].reshape(b, 21, 3)
+        for j, c, sign in BEND_LIMITS:
+            reg = reg + (s0 * config.prior_bend) ** 2 * torch.relu(sign * pose[:, j - 1, c]) ** 2
+        return (0.5 * (data + reg) / s0**2).sum()
+
+    params = list(var.values()) + [log_s, d_t]
+    begin = time.perf_counter()
+    if method == "lbfgs":
+        opt = torch.optim.LBFGS(params, lr=1.0, max_iter=iterations, line_search_fn="strong_wolfe")
+
+        def closure():
+            opt.zero_grad()
+            loss = cost()
+            loss.backward()
+            return loss
+
+        opt.step(closure)
+    else:
+        opt = torch.optim.Adam(params, lr=0.02)
+        for _ in range(iterations):
+            opt.zero_grad()
+            loss = cost()
+            loss.backward()
+            opt.step()
+    seconds = time.perf_counter() - begin
+    from smplx_jax import SMPLXParams
+
+    j = lambda k, shape: jnp.asarray(var[k].detach().numpy().reshape(shape))  # noqa: E731
+    params = SMPLXParams(j("global_orient", (b, 3)), j("body_pose", (b, 21, 3)), j("left_hand_pose", (b, 15, 3)),
+                         j("right_hand_pose", (b, 15, 3)), jnp.zeros((b, 3)), jnp.zeros((b, 3)), jnp.zeros((b, 3)),
+                         j("betas", (b, 10)), jnp.zeros((b, 10)), jnp.zeros((b, 3)))
+    scale = (s0 * torch.exp(log_s)).detach().numpy()
+    trans = (t0 + s0[:, None] * d_t).detach().numpy()
+    return seconds, params, scale, trans
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("bench/results"))
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--frames", type=int, nargs="*", default=[256, 1024])
+    args = parser.parse_args()
+
+    import torch
+
+    import smplx_jax
+    from jaxmocap.integrate import fitting, solver, synthetic
+    from jaxmocap.integrate.camera import weak_perspective_from_points
+    from jaxmocap.integrate import reprojection_errors
+
+    threads = os.cpu_count()
+    path = smplx_jax.default_model_path()
+    model = smplx_jax.load_model(path)
+    km = fitting.openpose_keypoint_model(model)
+    config = fitting.FitConfig()
+    iterations = config.iterations
+
+    @jax.jit
+    @jax.vmap
+    def start_camera(theta, betas, kp):
+        x = solver.model_keypoints(km, theta, betas)
+        s, t = weak_perspective_from_points(x[:, :2], kp[:, :2], kp[:, 2])
+        return jnp.concatenate([s[None], t])
+
+    rows = []
+    for frames in args.frames:
+        problem = synthetic.make_problem(model, frames, seed=frames)
+        cam0 = np.asarray(start_camera(fitting.full_pose_of(problem.init), problem.init.betas,
+                                       jnp.asarray(problem.keypoints)))
+        err = lambda p, s, t: float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))  # noqa: E731
+        run = lambda: jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0],  # noqa
+                                                        cam0[:, 1:], iterations=iterations))
+        begin = time.perf_counter()
+        run()
+        compile_s = time.perf_counter() - begin
+        times = []
+        for _ in range(2 if args.quick else 4):
+            begin = time.perf_counter()
+            result = run()
+            times.append(time.perf_counter() - begin)
+        seconds = min(times)
+        row = dict(frames=frames, iterations=iterations, jax_seconds=seconds, jax_fps=frames / seconds,
+                   jax_first_call_seconds=compile_s,
+                   start_error_px=err(problem.init, cam0[:, 0], cam0[:, 1:]),
+                   jax_error_px=err(result.params, result.camera_scale, result.camera_trans))
+        if not (args.quick and frames > 256):
+            for method in ("lbfgs", "adam"):
+                secs, params, s, t = torch_fit(path.parent.parent, problem, cam0, config, method, iterations, threads)
+                row[f"torch_{method}_fps"] = frames / secs
+                row[f"torch_{method}_error_px"] = err(params, s, t)
+                row[f"speedup_vs_{method}"] = secs / seconds
+        rows.append(row)
+        print(row, flush=True)
+
+    print(f"\nfit ({iterations} iterations), float32, {threads} threads, {platform.processor() or platform.machine()}, "
+          f"jax {jax.__version__}, torch {torch.__version__}; median final reprojection error in px")
+    print(f"{'frames':>6} {'start px':>9} {'jax fps':>9} {'jax px':>7} {'LBFGS fps':>10} {'LBFGS px':>9} "
+          f"{'ratio':>7} {'Adam fps':>9} {'Adam px':>8} {'ratio':>7}")
+    for r in rows:
+        torch_cols = (f"{r['torch_lbfgs_fps']:>10.1f} {r['torch_lbfgs_error_px']:>9.2f} "
+                      f"{r['speedup_vs_lbfgs']:>6.1f}x "
+                      f"{r['torch_adam_fps']:>9.1f} {r['torch_adam_error_px']:>8.2f} {r['speedup_vs_adam']:>6.1f}x"
+                      if "torch_lbfgs_fps" in r else f"{'-':>10} {'-':>9} {'-':>7} {'-':>9} {'-':>8} {'-':>7}")
+        print(f"{r['frames']:>6} {r['start_error_px']:>9.2f} {r['jax_fps']:>9.1f} {r['jax_error_px']:>7.2f} "
+              f"{torch_cols}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    result = dict(benchmark="fit", threads=threads, machine=platform.machine(), jax=jax.__version__,
+                  torch=torch.__version__, devices=[str(d) for d in jax.devices()], config=vars(config), rows=rows)
+    (args.out / "fit.json").write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.out / 'fit.json'}")
+
+
+if __name__ == "__main__":
+    main()

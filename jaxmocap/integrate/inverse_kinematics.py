@@ -1,0 +1,103 @@
+"""Inverse kinematics from 3D landmarks: the embedded default's initial whole-body pose, no trained network.
+
+Targets are metric 3D points in image-aligned axes (x right, y down, z away from the camera): mediapipe's
+BlazePose world landmarks (metres about the hips) and each hand's 21 world landmarks, or any 3D joints. The
+solver (`solver.solve` with D = 3) fits joint rotations together with a free scale and offset per target set, so
+the residuals are scale- and offset-free: BlazePose's hip centre is not SMPL-X's pelvis and its skeleton is not
+ours; what is fitted is the shape of the point set, i.e. bone directions. Hands are fitted after the body with
+the body fixed: the wrist's local rotation and the 15 finger joints of that side (the hand's own scale and offset
+free), so the hand's global orientation is pasted under the body's forward kinematics as copy-and-paste does.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxmocap.integrate import solver
+from jaxmocap.integrate.fitting import default_pose
+from smplx_jax import BodyModel, constants
+
+# BlazePose landmark -> SMPL-X output joint (127-joint index); eyes/ears/heels/toes are vertex joints.
+BLAZEPOSE_TO_SMPLX = {0: 55, 2: 57, 5: 56, 7: 59, 8: 58, 11: 16, 12: 17, 13: 18, 14: 19, 15: 20, 16: 21, 23: 1,
+                      24: 2, 25: 4, 26: 5, 27: 7, 28: 8, 29: 62, 30: 65, 31: 60, 32: 63}
+# Landmarks that sit elsewhere than their SMPL-X counterparts (hip joints inside the pelvis, face points on the
+# surface) get less weight.
+BLAZEPOSE_WEIGHT = {0: 0.3, 2: 0.3, 5: 0.3, 7: 0.3, 8: 0.3, 23: 0.5, 24: 0.5}
+
+BODY_IK_JOINTS = tuple(j <= 21 and j not in (20, 21) for j in range(55))  # global + body, wrists left to hands
+LEFT_HAND_IK_JOINTS = tuple(j == 20 or 25 <= j < 40 for j in range(55))
+RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
+
+IKConfig = functools.partial(solver.SolverConfig, iterations=20, cg_iterations=30, prior_global=1e-4, prior_body=2e-3,
+                             prior_hand=5e-4, robust_scale=0.2)
+
+_KM: dict = {}
+
+
+def _keypoint_model(model: BodyModel, index: tuple[int, ...]) -> solver.KeypointModel:
+    key = (id(model), index)
+    hit = _KM.get(key)
+    if hit is None or hit[0] is not model:
+        hit = (model, solver.keypoint_model(model, index))
+        _KM[key] = hit
+    return hit[1]
+
+
+def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
+    finite = jnp.all(jnp.isfinite(targets), -1)
+    conf = jnp.where(finite & (conf > 0), conf, 0.0)
+    targets = jnp.where(finite[:, None], targets, 0.0)
+    x0 = solver.model_keypoints(km, theta, betas)
+    w = conf / jnp.maximum(jnp.sum(conf), 1e-12)
+    cam = jnp.concatenate([jnp.ones(1, theta.dtype), jnp.sum(w[:, None] * (targets - x0), 0)])
+    prior = np.where(np.arange(55) == 0, config.prior_global,
+                     np.where(np.arange(55) <= 21, config.prior_body, config.prior_hand)).astype(np.float32)
+    problem = solver.Problem(targets, conf, theta, jnp.asarray(prior), jnp.asarray(1.0, theta.dtype))
+    out = solver.solve(km, problem, theta, betas, cam, free_joints, fit_betas, True, config)
+    ok = (jnp.sum(conf > 0) >= 3) & jnp.all(jnp.isfinite(out.theta)) & jnp.all(jnp.isfinite(out.cam))
+    return jnp.where(ok, out.theta, theta), jnp.where(ok, out.betas, betas), jnp.where(ok, out.cam, cam), ok
+
+
+@functools.partial(jax.jit, static_argnames=("free_joints", "fit_betas", "config"))
+def _ik_batch(km, targets, conf, theta, betas, free_joints, fit_betas, config):
+    one = functools.partial(_ik_one, free_joints=free_joints, fit_betas=fit_betas, config=config)
+    return jax.vmap(one, in_axes=(None, 0, 0, 0, 0))(km, targets, conf, theta, betas)
+
+
+def ik(model: BodyModel, index, targets, conf, theta, betas, free_joints, *, fit_betas: bool = False,
+       config: solver.SolverConfig | None = None):
+    """Fit ``theta (T, 55, 3)`` (joints ``free_joints`` free) and optionally ``betas`` so that the model's joints
+    ``index`` (into the 127) match ``targets (T, K, 3)`` up to a scale and an offset. Returns
+    ``(theta, betas, cam (T, 4) = scale, offset, ok (T,))``; non-finite targets count as missing."""
+    km = _keypoint_model(model, tuple(int(i) for i in index))
+    return _ik_batch(km, jnp.asarray(targets, jnp.float32), jnp.asarray(conf, jnp.float32),
+                     jnp.asarray(theta, jnp.float32), jnp.asarray(betas, jnp.float32),
+                     tuple(bool(f) for f in free_joints), fit_betas, config or IKConfig())
+
+
+def body_from_blazepose(model: BodyModel, world: np.ndarray, theta=None, betas=None, config=None):
+    """Body pose from BlazePose world landmarks ``(T, 33, 3)`` (or ``(T, 33, 4)`` with visibility as confidence).
+    Starts from ``theta`` (default `default_pose`); wrists and hands are kept."""
+    world = np.asarray(world, np.float32)
+    t = world.shape[0]
+    ids = list(BLAZEPOSE_TO_SMPLX)
+    targets = world[:, ids, :3]
+    conf = world[:, ids, 3] if world.shape[-1] > 3 else np.ones((t, len(ids)), np.float32)
+    conf = conf * np.array([BLAZEPOSE_WEIGHT.get(i, 1.0) for i in ids], np.float32)
+    theta = np.broadcast_to(np.asarray(default_pose()), (t, 55, 3)) if theta is None else theta
+    betas = np.zeros((t, model.num_betas), np.float32) if betas is None else betas
+    return ik(model, [BLAZEPOSE_TO_SMPLX[i] for i in ids], targets, conf, theta, betas, BODY_IK_JOINTS, config=config)
+
+
+def hand_into_body(model: BodyModel, side: str, hand_world: np.ndarray, theta, betas, conf=None, config=None):
+    """Wrist and fingers of one side from the hand's 21 3D landmarks ``(T, 21, 3)`` (OpenPose/mediapipe order),
+    the rest of the body fixed."""
+    index = constants.LEFT_HAND21_FROM_SMPLX if side == "left" else constants.RIGHT_HAND21_FROM_SMPLX
+    free = LEFT_HAND_IK_JOINTS if side == "left" else RIGHT_HAND_IK_JOINTS
+    hand_world = np.asarray(hand_world, np.float32)
+    conf = np.ones(hand_world.shape[:2], np.float32) if conf is None else conf
+    return ik(model, index, hand_world[..., :3], conf, theta, betas, free, config=config)

@@ -1,0 +1,49 @@
+"""Per-frame fits -> the arrays of ``motion.npz``: optional temporal smoothing, then the reprojection errors of
+what is stored (so that the file's errors are those of its own parameters)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import smplx_jax
+from jaxmocap.integrate import fitting
+from jaxmocap.integrate.smooth import smooth_camera, smooth_params
+from smplx_jax import constants
+
+_OPENPOSE = np.asarray(constants.OPENPOSE67_FROM_SMPLX)
+_JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
+_SMOOTH = jax.jit(smooth_params)
+
+
+def reprojection_errors(model, params, scale, trans, keypoints) -> np.ndarray:
+    """Mean pixel distance per frame over keypoints with confidence > 0 (0 where none)."""
+    joints = []
+    for start in range(0, keypoints.shape[0], fitting.BUCKETS[-1]):
+        stop = min(keypoints.shape[0], start + fitting.BUCKETS[-1])
+        n, size = stop - start, fitting.bucket_size(stop - start)
+        chunk = jax.tree.map(lambda a: jnp.concatenate([a[start:stop], jnp.repeat(a[start:start + 1], size - n, 0)]),
+                             params)
+        joints.append(np.asarray(_JOINTS(model, chunk))[:n])
+    joints = np.concatenate(joints)[:, _OPENPOSE]
+    pix = np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None, :]
+    seen = keypoints[..., 2] > 0
+    dist = np.where(seen, np.linalg.norm(pix - keypoints[..., :2], axis=-1), 0.0)
+    return (dist.sum(1) / np.maximum(seen.sum(1), 1)).astype(np.float32)
+
+
+def fitted_motion(model, params: smplx_jax.SMPLXParams, camera_scale, camera_trans, valid, keypoints,
+                  smooth: bool) -> dict[str, np.ndarray]:
+    """``motion.npz`` arrays (all but ``fps``, ``image_size``, ``model_sha256``) of batched fits; invalid frames
+    keep their parameters and get error 0."""
+    valid = np.asarray(valid, bool)
+    scale, trans = jnp.asarray(camera_scale), jnp.asarray(camera_trans)
+    if smooth and valid.any():
+        params = _SMOOTH(params, jnp.asarray(valid))
+        scale, trans = smooth_camera(scale, trans, jnp.asarray(valid))
+    keypoints = np.asarray(keypoints, np.float32)
+    errors = reprojection_errors(model, params, scale, trans, keypoints)
+    arrays = {k: np.asarray(getattr(params, k), np.float32) for k in (
+        "global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "betas", "transl")}
+    return arrays | {"camera_scale": np.asarray(scale, np.float32), "camera_trans": np.asarray(trans, np.float32),
+                     "valid": valid, "keypoints_2d": keypoints,
+                     "reprojection_error_px": np.where(valid, errors, 0.0).astype(np.float32)}

@@ -1,0 +1,75 @@
+"""Temporal smoothing of per-frame fits with FrankMocap's kernel ``[0.1, 0.2, 0.5, 0.2, 0.1]``.
+
+Rotations are averaged as unit quaternions, each neighbour's sign aligned to the centre frame's (q and -q are
+one rotation), then normalised: averaging raw axis-angles is wrong near pi, where a rotation's axis-angle jumps
+between ``v`` and ``-(2 pi - |v|) v/|v|``. Other parameters are averaged linearly. Frames marked invalid neither
+contribute nor change; at the ends and beside invalid frames the kernel is renormalised over what is there.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from smplx_jax import SMPLXParams
+from smplx_jax.rotations import quat_to_rotvec, rotvec_to_quat
+
+KERNEL = (0.1, 0.2, 0.5, 0.2, 0.1)
+
+
+def _shifted(x, offset):
+    """``x[t + offset]`` with zeros outside ``[0, T)``."""
+    t = x.shape[0]
+    pad = jnp.zeros((abs(offset),) + x.shape[1:], x.dtype)
+    if offset > 0:
+        return jnp.concatenate([x[offset:], pad])[:t]
+    if offset < 0:
+        return jnp.concatenate([pad, x[:offset]])[:t]
+    return x
+
+
+def _weights(valid, kernel):
+    half = len(kernel) // 2
+    v = valid.astype(jnp.float32)
+    return [(o - half, k * _shifted(v, o - half)) for o, k in enumerate(kernel)]
+
+
+def _expand(w, like):
+    return w.reshape(w.shape + (1,) * (like.ndim - 1))
+
+
+def smooth_linear(values: Float[Array, "T ..."], valid: Bool[Array, "T"], kernel=KERNEL) -> Float[Array, "T ..."]:
+    total = 0.0
+    acc = jnp.zeros_like(values)
+    for offset, w in _weights(valid, kernel):
+        acc = acc + _expand(w, values) * _shifted(values, offset)
+        total = total + w
+    out = acc / _expand(jnp.where(total > 0, total, 1.0), values)
+    return jnp.where(_expand(valid, values), out, values)
+
+
+def smooth_rotvecs(rotvecs: Float[Array, "T ... 3"], valid: Bool[Array, "T"], kernel=KERNEL) -> Float[Array, "T ... 3"]:
+    """Axis-angles smoothed over time as sign-aligned quaternions."""
+    q = rotvec_to_quat(rotvecs)
+    acc = jnp.zeros_like(q)
+    for offset, w in _weights(valid, kernel):
+        qn = _shifted(q, offset)
+        sign = jnp.where(jnp.sum(qn * q, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+        acc = acc + _expand(w, q) * sign * qn
+    norm = jnp.linalg.norm(acc, axis=-1, keepdims=True)
+    out = quat_to_rotvec(acc / jnp.where(norm > 0, norm, 1.0))
+    return jnp.where(_expand(valid, rotvecs) & (norm > 0), out, rotvecs)
+
+
+def smooth_params(params: SMPLXParams, valid: Bool[Array, "T"], kernel=KERNEL) -> SMPLXParams:
+    """Every rotation of a batch of bodies (T leading) smoothed as rotations; shape, expression, ``transl``
+    linearly."""
+    rot = lambda a: smooth_rotvecs(a, valid, kernel)  # noqa: E731
+    lin = lambda a: smooth_linear(a, valid, kernel)  # noqa: E731
+    return SMPLXParams(rot(params.global_orient), rot(params.body_pose), rot(params.left_hand_pose),
+                       rot(params.right_hand_pose), rot(params.jaw_pose), rot(params.leye_pose), rot(params.reye_pose),
+                       lin(params.betas), lin(params.expression), lin(params.transl))
+
+
+def smooth_camera(scale: Float[Array, "T"], trans: Float[Array, "T 2"], valid: Bool[Array, "T"], kernel=KERNEL):
+    return smooth_linear(scale, valid, kernel), smooth_linear(trans, valid, kernel)

@@ -1,0 +1,84 @@
+"""Synthetic fitting problems with known answers (tests and benchmarks): random plausible whole-body poses,
+projected with a known weak-perspective camera, with pixel noise and dropped keypoints, and a perturbed start."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from smplx_jax import BodyModel, SMPLXParams, constants, forward_joints, rotations
+
+IMAGE_SIZE = (1000, 1000)
+
+
+class Synthetic(NamedTuple):
+    truth: SMPLXParams  # (T,)
+    camera_scale: np.ndarray  # (T,)
+    camera_trans: np.ndarray  # (T, 2)
+    clean: np.ndarray  # (T, 67, 2) exact projections
+    keypoints: np.ndarray  # (T, 67, 3) noisy, some dropped (confidence 0)
+    init: SMPLXParams  # (T,) perturbed truth
+
+
+def random_pose(rng, t: int) -> np.ndarray:
+    """(T, 55, 3) plausible poses in image axes (y down): upright, facing the camera +-30 degrees."""
+    theta = np.zeros((t, 55, 3))
+    yaw = rng.uniform(-0.5, 0.5, t)
+    flip = np.array([np.pi, 0.0, 0.0])
+    rot = rotations.rotvec_to_rotmat(jnp.asarray(flip)) @ rotations.rotvec_to_rotmat(
+        jnp.asarray(np.stack([np.zeros(t), yaw, np.zeros(t)], 1)))
+    theta[:, 0] = np.asarray(rotations.rotmat_to_rotvec(rot))
+    theta[:, 1:22] = rng.normal(0, 0.2, (t, 21, 3))
+    theta[:, 16, 2] += rng.uniform(-1.3, -0.3, t)  # left shoulder down
+    theta[:, 17, 2] += rng.uniform(0.3, 1.3, t)
+    theta[:, 18, 1] = -rng.uniform(0.1, 1.5, t)  # elbows bent the natural way
+    theta[:, 19, 1] = rng.uniform(0.1, 1.5, t)
+    theta[:, 4, 0] = rng.uniform(0.0, 1.0, t)  # knees
+    theta[:, 5, 0] = rng.uniform(0.0, 1.0, t)
+    curl = rng.uniform(0.0, 1.2, (t, 2, 5, 1))  # per finger
+    hands = rng.normal(0, 0.1, (t, 2, 15, 3))
+    for side, sign in ((0, -1.0), (1, 1.0)):
+        for finger in range(4):  # index, middle, pinky, ring curl about z
+            hands[:, side, 3 * finger:3 * finger + 3, 2] += sign * curl[:, side, finger]
+        hands[:, side, 12:15, 1] += sign * 0.5 * curl[:, side, 4]
+    theta[:, 25:40] = hands[:, 0]
+    theta[:, 40:55] = hands[:, 1]
+    return theta.astype(np.float32)
+
+
+def _params(theta, betas, num_expression):
+    t = theta.shape[0]
+    f = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+    return SMPLXParams(f(theta[:, 0]), f(theta[:, 1:22]), f(theta[:, 25:40]), f(theta[:, 40:55]), f(theta[:, 22]),
+                       f(theta[:, 23]), f(theta[:, 24]), f(betas), jnp.zeros((t, num_expression)), jnp.zeros((t, 3)))
+
+
+_JOINTS = jax.jit(jax.vmap(forward_joints, in_axes=(None, 0)))
+
+
+def openpose_projection(model: BodyModel, params: SMPLXParams, scale, trans) -> np.ndarray:
+    joints = np.asarray(_JOINTS(model, params))[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
+    return np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None, :]
+
+
+def make_problem(model: BodyModel, t: int, seed: int = 0, noise_px: float = 2.0, drop: float = 0.15,
+                 perturb: float = 1.0) -> Synthetic:
+    rng = np.random.default_rng(seed)
+    theta = random_pose(rng, t)
+    betas = rng.normal(0, 1.0, (t, model.num_betas)).astype(np.float32)
+    scale = rng.uniform(300, 450, t).astype(np.float32)
+    trans = (np.array(IMAGE_SIZE, np.float32) / 2 + rng.normal(0, 30, (t, 2))).astype(np.float32)
+    truth = _params(theta, betas, model.num_expression)
+    clean = openpose_projection(model, truth, scale, trans)
+    keypoints = np.concatenate([clean + rng.normal(0, noise_px, clean.shape), np.ones(clean.shape[:2] + (1,))], -1)
+    keypoints[rng.uniform(size=clean.shape[:2]) < drop] = 0.0
+    init_theta = theta.copy()
+    init_theta[:, 0] += rng.normal(0, 0.05 * perturb, (t, 3))
+    init_theta[:, 1:22] += rng.normal(0, 0.12 * perturb, (t, 21, 3))
+    init_theta[:, 25:55] += rng.normal(0, 0.15 * perturb, (t, 30, 3))
+    init_betas = betas + rng.normal(0, 0.5 * perturb, betas.shape).astype(np.float32)
+    init = _params(init_theta, init_betas, model.num_expression)
+    return Synthetic(truth, scale, trans, clean, keypoints.astype(np.float32), init)

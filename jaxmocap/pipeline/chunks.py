@@ -1,0 +1,42 @@
+"""Resumable chunk store: each finished chunk of frames is a file; a rerun with the same settings skips them."""
+
+import io
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from jaxmocap.io import atomic_write_bytes, atomic_write_text
+
+
+class ChunkStore:
+    """``<out>/.jaxmocap_chunks/``: ``settings.json`` and ``chunk_<k>.npz``. Settings that differ from the stored
+    ones (another input, range, model or option) discard the stored chunks."""
+
+    def __init__(self, out_dir: Path, settings: dict):
+        self.folder = Path(out_dir) / ".jaxmocap_chunks"
+        stored = self.folder / "settings.json"
+        text = json.dumps(settings, sort_keys=True)
+        if stored.is_file() and stored.read_text() != text:
+            shutil.rmtree(self.folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(stored, text)
+
+    def _path(self, index: int) -> Path:
+        return self.folder / f"chunk_{index:06d}.npz"
+
+    def load(self, index: int) -> dict[str, np.ndarray] | None:
+        path = self._path(index)
+        if not path.is_file():
+            return None
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+
+    def save(self, index: int, arrays: dict[str, np.ndarray]) -> None:
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        atomic_write_bytes(self._path(index), buffer.getvalue())
+
+    def clear(self) -> None:
+        shutil.rmtree(self.folder, ignore_errors=True)

@@ -1,0 +1,163 @@
+"""``jaxmocap run``: video (or images, or a webcam) in; whole-body SMPL-X motion, keypoints, overlay and exports out.
+
+The embedded default path (no licensed file): detector (2D keypoints and metric 3D landmarks) -> IK of body and hands from the 3D
+landmarks (hands pasted under the body's kinematics) -> optimisation integration on the 2D keypoints ->
+temporal smoothing. With FrankMocap's converted weights: body and hand regressors on the detector's boxes ->
+copy-and-paste -> optionally the same fit. Frames go in chunks; each finished chunk is stored, so an interrupted run resumes where it
+stopped and ends with the same ``motion.npz`` as an uninterrupted one (the detector starts afresh at every
+chunk, in both cases).
+"""
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import smplx_jax
+from jaxmocap.detect import Detector
+from jaxmocap.detect.openpose import json_name, write_openpose_json
+from jaxmocap.errors import InputError
+from jaxmocap.integrate import body_from_blazepose, fit, fitted_motion, hand_into_body
+from jaxmocap.integrate.fitting import params_from_full_pose
+from jaxmocap.io import file_sha256
+from jaxmocap.media import open_media
+from jaxmocap.motion import write_motion
+from jaxmocap.pipeline.chunks import ChunkStore
+from jaxmocap.pipeline.observe import observe
+from jaxmocap.pipeline.outputs import EXPORT_FILES, write_exports, write_overlay
+from jaxmocap.pipeline.regress import Regression, solve_regressors
+
+SETTINGS_VERSION = 1
+
+
+@dataclass
+class RunReport:
+    """What a run wrote and how long each stage took (seconds)."""
+
+    motion: Path
+    frames: int
+    valid: int
+    seconds: dict = field(default_factory=lambda: defaultdict(float))
+    written: list = field(default_factory=list)
+
+
+def _solve(model, obs, iterations, seconds):
+    """IK from the 3D landmarks, then the fit to the 2D keypoints, for one chunk of frames."""
+    t0 = time.perf_counter()
+    theta, betas, _, _ = body_from_blazepose(model, obs.body_world)
+    for side, name in enumerate(("left", "right")):
+        conf = np.repeat(obs.hands_conf[:, side:side + 1] > 0, 21, axis=1).astype(np.float32)
+        theta, betas, _, _ = hand_into_body(model, name, obs.hands_world[:, side], theta, betas, conf=conf)
+    init = params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression)
+    jax.block_until_ready(init)
+    t1 = time.perf_counter()
+    result = fit(model, obs.keypoints, init=init, iterations=iterations)
+    jax.block_until_ready(result)
+    seconds["ik"] += t1 - t0
+    seconds["fit"] += time.perf_counter() - t1
+    arrays = {k: np.asarray(v) for k, v in vars(result.params).items()}
+    return arrays | {"camera_scale": np.asarray(result.camera_scale), "camera_trans": np.asarray(result.camera_trans),
+                     "valid": obs.found & np.asarray(result.valid)}
+
+
+def run(source, out_dir, *, model_path=None, weights=None, integration: str = "optimize", start: int = 0,
+        end: int | None = None, stride: int = 1, chunk_size: int = 128, iterations: int = 20, smooth: bool = True,
+        overlay: bool = True, exports: tuple[str, ...] = (), progress: bool = True) -> RunReport:
+    """Run over ``source`` and write ``out_dir/motion.npz`` (DESIGN 2.3), the detections as OpenPose JSON in
+    ``out_dir/keypoints/``, ``out_dir/overlay.mp4`` and the requested exports. Without ``weights`` the embedded
+    default path; with ``weights`` (from ``convert-frankmocap``) FrankMocap's regressors, copy-and-paste and, for
+    ``integration="optimize"``, the fit."""
+    from tqdm import tqdm
+
+    if integration not in ("optimize", "copy-paste"):
+        raise InputError(f"unknown integration {integration!r} (optimize or copy-paste)")
+    if integration == "copy-paste" and weights is None:
+        raise InputError("--integration copy-paste needs --weights (the regressors); the default path optimizes")
+    unknown = sorted(set(exports) - set(EXPORT_FILES))
+    if unknown:
+        raise InputError(f"unknown export format(s) {', '.join(unknown)} (known: {', '.join(EXPORT_FILES)})")
+    out_dir = Path(out_dir)
+    (out_dir / "keypoints").mkdir(parents=True, exist_ok=True)
+    model_path = Path(model_path) if model_path else smplx_jax.default_model_path()
+    model = smplx_jax.load_model(model_path)
+    model_sha = file_sha256(model_path)
+    regression = Regression.load(weights, model) if weights is not None else None
+    media, frames = open_media(source, start, end, stride)
+    still = media.kind in ("image", "images")
+    source_id = str(Path(source).resolve()) if not str(source).isdigit() else str(source)
+    store = ChunkStore(out_dir, dict(version=SETTINGS_VERSION, source=source_id, start=start, end=end, stride=stride,
+                                     chunk=chunk_size, iterations=iterations, model=model_sha,
+                                     weights=weights and file_sha256(Path(weights) / "regressors.json"),
+                                     integration=integration))
+    detector = Detector(static_image_mode=still)
+    report = RunReport(out_dir / "motion.npz", 0, 0)
+    seconds = report.seconds
+    chunks, frame_ids = [], []
+    bar = tqdm(total=media.frame_count, unit="frame", desc="run", disable=not progress)
+    iterator = iter(frames)
+    index = 0
+    while True:
+        t0 = time.perf_counter()
+        batch = [item for _, item in zip(range(chunk_size), iterator)]
+        seconds["decode"] += time.perf_counter() - t0
+        if not batch:
+            break
+        ids = [i for i, _ in batch]
+        stored = store.load(index)
+        if stored is None or not np.array_equal(stored["frame_index"], ids):
+            t0 = time.perf_counter()
+            detector.reset()
+            obs = observe(detector, [frame for _, frame in batch])
+            seconds["detect"] += time.perf_counter() - t0
+            if regression is None:
+                solved = _solve(model, obs, iterations, seconds)
+            else:
+                t0 = time.perf_counter()
+                solved = solve_regressors(model, regression, [frame for _, frame in batch], obs, integration,
+                                          iterations)
+                seconds["regress+integrate"] += time.perf_counter() - t0
+            stored = solved | {"keypoints_2d": obs.keypoints, "frame_index": np.asarray(ids)}
+            store.save(index, stored)
+            for n, frame_id in enumerate(ids):
+                name = json_name(media.stems[frame_id - start] if still else media.stem, None if still else frame_id)
+                write_openpose_json(out_dir / "keypoints" / name, obs.keypoints[n][None] if obs.found[n] else
+                                    np.zeros((0, 67, 3)))
+        chunks.append(stored)
+        frame_ids.extend(ids)
+        index += 1
+        bar.update(len(batch))
+        bar.set_postfix(fps=f"{len(frame_ids) / max(sum(seconds.values()), 1e-9):.1f}")
+    bar.close()
+
+    t0 = time.perf_counter()
+    motion = _assemble(model, chunks, smooth)
+    motion |= {"fps": np.asarray(media.fps), "image_size": np.asarray(media.size), "model_sha256": np.asarray(model_sha)}
+    write_motion(report.motion, motion)
+    seconds["smooth+write"] += time.perf_counter() - t0
+    report.frames, report.valid = len(frame_ids), int(motion["valid"].sum())
+    report.written.append(report.motion)
+    if overlay:
+        t0 = time.perf_counter()
+        report.written.append(write_overlay(out_dir / "overlay.mp4", model, motion, source, start, end, stride,
+                                            progress=progress))
+        seconds["overlay"] += time.perf_counter() - t0
+    if exports:
+        t0 = time.perf_counter()
+        report.written.extend(write_exports(out_dir, model, motion, exports))
+        seconds["exports"] += time.perf_counter() - t0
+    store.clear()
+    return report
+
+
+def _assemble(model, chunks, smooth):
+    """The whole sequence from its chunks, smoothed over all frames."""
+    cat = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0] if k != "frame_index"}
+    params = smplx_jax.SMPLXParams(**{k: jnp.asarray(cat[k]) for k in (
+        "global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "leye_pose", "reye_pose",
+        "betas", "expression", "transl")})
+    return fitted_motion(model, params, cat["camera_scale"], cat["camera_trans"], cat["valid"], cat["keypoints_2d"],
+                         smooth)

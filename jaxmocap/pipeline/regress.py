@@ -1,0 +1,79 @@
+"""The FrankMocap path: body and hand regressors on the detector's boxes, copy-and-paste, optionally the fit."""
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import smplx_jax
+from jaxmocap.integrate import copy_paste, fit
+from jaxmocap.pipeline.observe import Observations
+from jaxmocap.regressors import Predictor, crops, decode_bodies, decode_hands, load, predict_bodies, predict_hands
+from smplx_jax import constants
+from smplx_jax.rotations import rotmat_to_rotvec
+
+FRAMES_PER_BATCH = 16  # frames held as one image batch for cropping (memory: 16 x H x W x 3 bytes)
+_PASTE = jax.jit(jax.vmap(copy_paste, in_axes=(None, 0, 0, 0, 0, 0)))
+
+
+@dataclass(frozen=True)
+class Regression:
+    """Loaded networks and what decoding them needs (built once per run)."""
+
+    predictor: Predictor
+    right_hand: smplx_jax.HandModel
+
+    @classmethod
+    def load(cls, weights_dir, model: smplx_jax.BodyModel) -> "Regression":
+        return cls(Predictor(load(weights_dir)), smplx_jax.hand_model(model, "right"))
+
+
+def _xywh(boxes):
+    return np.concatenate([boxes[..., :2], boxes[..., 2:] - boxes[..., :2]], axis=-1)
+
+
+def _pixel_camera(camera, window):
+    """The weak-perspective camera of DESIGN 2.3 (pixel = s X[:2] + t) equal to the body crop's camera."""
+    basis = jnp.broadcast_to(jnp.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), (camera.shape[0], 2, 3))
+    pixels = crops.body_to_image(basis, camera, window)
+    return pixels[:, 1, 0] - pixels[:, 0, 0], pixels[:, 0]
+
+
+def _regress(model, reg: Regression, frames, obs: Observations, rows):
+    """Copy-and-paste bodies of the frames ``rows`` and their pixel cameras; ``ok`` where the body was cropped."""
+    images = np.stack([frames[i] for i in rows])
+    local = np.arange(len(rows))
+    body_raw, body_window, body_ok = predict_bodies(reg.predictor, images, local, _xywh(obs.body_box[rows]))
+    body = decode_bodies(model, body_raw, body_window)
+    boxes = _xywh(obs.hand_boxes[rows].reshape(-1, 4))
+    is_left = np.tile([True, False], len(rows))
+    hand_raw, hand_window, hand_ok = predict_hands(reg.predictor, images, np.repeat(local, 2), boxes, is_left)
+    hands = decode_hands(model, reg.right_hand, hand_raw, is_left, hand_window)
+    hand_ok = hand_ok.reshape(-1, 2)
+    glob = jax.vmap(smplx_jax.posed_skeleton, in_axes=(None, 0))(model, body.params).glob_rotmats
+    own = rotmat_to_rotvec(glob[:, [constants.LEFT_WRIST, constants.RIGHT_WRIST]])  # the body's own wrists
+    wrists = jnp.where(hand_ok[..., None], hands.wrist_glob_rotvec.reshape(-1, 2, 3), own)
+    fingers = jnp.where(hand_ok[..., None, None], hands.hand_pose.reshape(-1, 2, 15, 3),
+                        jnp.stack([body.params.left_hand_pose, body.params.right_hand_pose], axis=1))
+    safe = jax.tree.map(lambda a: jnp.where(jnp.isfinite(a), a, 0.0), body.params)
+    pasted = _PASTE(model, safe, fingers[:, 0], wrists[:, 0], fingers[:, 1], wrists[:, 1])
+    scale, trans = _pixel_camera(jnp.where(jnp.isfinite(body_raw.camera), body_raw.camera, 1.0), body_window)
+    return pasted, np.asarray(scale), np.asarray(trans), body_ok
+
+
+def solve_regressors(model, reg: Regression, frames, obs: Observations, integration: str, iterations: int) -> dict:
+    """Per-frame parameters and camera for one chunk: regressors + copy-and-paste (+ the fit with
+    ``integration == "optimize"``)."""
+    parts = [_regress(model, reg, frames, obs, np.arange(s, min(s + FRAMES_PER_BATCH, len(frames))))
+             for s in range(0, len(frames), FRAMES_PER_BATCH)]
+    params = jax.tree.map(lambda *a: jnp.concatenate(a), *[p[0] for p in parts])
+    scale, trans, ok = (np.concatenate([p[k] for p in parts]) for k in (1, 2, 3))
+    ok = ok & obs.found & (scale > 0)
+    if integration == "optimize":
+        result = fit(model, obs.keypoints, init=params, camera_scale=np.where(ok, scale, 1.0),
+                     camera_trans=np.where(ok[:, None], trans, 0.0), iterations=iterations)
+        params, scale, trans = result.params, np.asarray(result.camera_scale), np.asarray(result.camera_trans)
+        ok = ok & np.asarray(result.valid)
+    arrays = {k: np.asarray(v) for k, v in vars(params).items()}
+    return arrays | {"camera_scale": scale, "camera_trans": trans, "valid": ok}

@@ -1,0 +1,271 @@
+"""Integration: copy-and-paste, the 2D fit, IK, smoothing, motion.npz and ``jaxmocap fit``.
+
+Jitted functions are shared at module level and every fit runs at one padded batch size (32), so the solver
+compiles once for the whole file.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import smplx
+import torch
+from conftest import load
+from params_util import random_params
+
+import smplx_jax
+from jaxmocap.cli import main
+from jaxmocap.detect.openpose import json_name, write_openpose_json
+from jaxmocap.integrate import copy_paste, fit, ik, smooth_params, smooth_rotvecs, synthetic
+from jaxmocap.integrate import fitting
+from jaxmocap.integrate.folder import infer_image_size
+from jaxmocap.motion import motion_params, read_motion
+from smplx_jax import constants, rotations
+
+T = 32  # frames per synthetic problem: one bucket
+
+
+@pytest.fixture(scope="module")
+def model(default_model_dir):
+    return load(default_model_dir)
+
+
+@pytest.fixture(scope="module")
+def noisy(model):
+    return synthetic.make_problem(model, T, seed=1, noise_px=2.0, drop=0.15)
+
+
+@pytest.fixture(scope="module")
+def noisy_fit(model, noisy):
+    return fit(model, noisy.keypoints, noisy.init)
+
+
+_SKELETON = jax.jit(jax.vmap(smplx_jax.posed_skeleton, in_axes=(None, 0)))
+_COPY_PASTE = jax.jit(jax.vmap(copy_paste, in_axes=(None, 0, 0, 0, 0, 0)))
+_SMOOTH_PARAMS = jax.jit(smooth_params)
+_SMOOTH_ROTVECS = jax.jit(smooth_rotvecs)
+
+
+def _geodesic(ra, rb):
+    """Angle of ra^T rb in radians (from its axis-angle: accurate for small angles, unlike arccos of the trace)."""
+    return np.linalg.norm(np.asarray(rotations.rotmat_to_rotvec(jnp.swapaxes(ra, -1, -2) @ rb)), axis=-1)
+
+
+def _clean_error(model, result, problem):
+    proj = synthetic.openpose_projection(model, result.params, result.camera_scale, result.camera_trans)
+    return np.linalg.norm(proj - problem.clean, axis=-1).mean(1)
+
+
+# ---- copy-and-paste -------------------------------------------------------------------------------------------
+
+def test_copy_paste_gives_each_wrist_the_hands_global_orientation(model):
+    body = random_params(0, 16, max_angle=2.5)
+    rng = np.random.default_rng(1)
+    lw, rw = (jnp.asarray(synthetic_rotvecs(rng, 16)) for _ in range(2))
+    lh, rh = jnp.asarray(rng.normal(0, 0.4, (2, 16, 15, 3)), jnp.float32)
+    pasted = _COPY_PASTE(model, body, lh, lw, rh, rw)
+    glob = _SKELETON(model, pasted).glob_rotmats
+    assert _geodesic(glob[:, constants.LEFT_WRIST], rotations.rotvec_to_rotmat(lw)).max() <= 1e-5
+    assert _geodesic(glob[:, constants.RIGHT_WRIST], rotations.rotvec_to_rotmat(rw)).max() <= 1e-5
+    np.testing.assert_allclose(glob[:, constants.LEFT_WRIST], rotations.rotvec_to_rotmat(lw), atol=1e-5)
+    np.testing.assert_allclose(glob[:, constants.RIGHT_WRIST], rotations.rotvec_to_rotmat(rw), atol=1e-5)
+    # finger poses pasted, the rest of the body untouched
+    np.testing.assert_array_equal(pasted.left_hand_pose, lh)
+    np.testing.assert_array_equal(pasted.right_hand_pose, rh)
+    keep = np.array([j for j in range(21) if j not in (19, 20)])
+    np.testing.assert_array_equal(pasted.body_pose[:, keep], body.body_pose[:, keep])
+    np.testing.assert_array_equal(pasted.betas, body.betas)
+
+
+def synthetic_rotvecs(rng, n):
+    axes = rng.normal(size=(n, 3))
+    return (axes / np.linalg.norm(axes, axis=1, keepdims=True) * rng.uniform(0, 3.0, (n, 1))).astype(np.float32)
+
+
+# ---- the 2D fit ---------------------------------------------------------------------------------------------
+
+def test_fit_recovers_ground_truth_from_noisy_partial_keypoints(model, noisy, noisy_fit):
+    r = noisy_fit
+    assert np.all(np.asarray(r.status) == fitting.OK)
+    err = np.asarray(r.reprojection_error_px)
+    assert np.median(err) <= 2.5, np.median(err)
+    assert np.all(err < np.asarray(r.initial_reprojection_error_px))
+    init = fitting.FitResult(noisy.init, jnp.asarray(noisy.camera_scale), jnp.asarray(noisy.camera_trans),
+                             *r[3:])  # the start, even with the true camera
+    better = _clean_error(model, r, noisy) < _clean_error(model, init, noisy)
+    assert better.mean() >= 0.95, better.mean()
+    for leaf in jax.tree.leaves(r):
+        assert np.all(np.isfinite(np.asarray(leaf)))
+
+
+def test_fit_without_noise_is_exact_to_half_a_pixel(model):
+    clean = synthetic.make_problem(model, T, seed=2, noise_px=0.0, drop=0.15)
+    r = fit(model, clean.keypoints, clean.init)
+    assert np.median(np.asarray(r.reprojection_error_px)) <= 0.5, np.median(np.asarray(r.reprojection_error_px))
+
+
+def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit):
+    before = fitting._fit_batch._cache_size()
+    sub = jax.tree.map(lambda a: a[:T - 5], noisy.init)
+    r = fit(model, noisy.keypoints[:T - 5], sub)  # 27 frames pad to the same bucket: no new compilation
+    assert fitting._fit_batch._cache_size() == before
+    assert fitting.bucket_size(T - 5) == fitting.bucket_size(T) == T
+    # padding does not change the frames' results (each frame's fit is independent of the others)
+    np.testing.assert_allclose(r.params.body_pose, noisy_fit.params.body_pose[:T - 5], atol=1e-4)
+
+
+def test_vmapped_fit_equals_the_fit_of_each_frame_alone(model, noisy, noisy_fit):
+    km = fitting.openpose_keypoint_model(model)
+    theta = fitting.full_pose_of(noisy.init)
+    one = jax.jit(lambda kp, th, b: fitting._fit_one(km, kp, th, b, jnp.ones(3), False, fitting.FitConfig()))
+    batched = synthetic.openpose_projection(model, noisy_fit.params, noisy_fit.camera_scale, noisy_fit.camera_trans)
+    for i in (0, 7):
+        th, betas, cam, status, err, _, _ = one(jnp.asarray(noisy.keypoints[i]), theta[i], noisy.init.betas[i])
+        assert int(status) == fitting.OK
+        # float32 sums run in another order batched, and 20 LM steps amplify that in weakly determined directions:
+        # what the data determine agrees to hundredths of a pixel, the parameters to a few milliradians
+        alone = synthetic.openpose_projection(model, fitting.params_from_full_pose(th[None], betas[None], 10),
+                                              cam[None, 0], cam[None, 1:])[0]
+        assert np.abs(alone - batched[i]).max() < 0.1
+        np.testing.assert_allclose(err, noisy_fit.reprojection_error_px[i], atol=0.01)
+        np.testing.assert_allclose(th[1:22], noisy_fit.params.body_pose[i], atol=0.02)
+
+
+def test_missing_people_and_non_finite_keypoints_are_masked(model, noisy, noisy_fit):
+    kp = noisy.keypoints.copy()
+    kp[3] = 0.0  # nobody in frame 3
+    kp[4, :10] = np.nan  # broken keypoints in frame 4
+    kp[5, 30] = np.inf
+    r = fit(model, kp, noisy.init)
+    status = np.asarray(r.status)
+    assert status[3] == fitting.NO_KEYPOINTS and np.all(np.delete(status, 3) == fitting.OK)
+    np.testing.assert_array_equal(r.params.body_pose[3], noisy.init.body_pose[3])  # the start, marked
+    assert not np.asarray(r.valid)[3]
+    for leaf in jax.tree.leaves(r):
+        assert np.all(np.isfinite(np.asarray(leaf)))
+    assert np.asarray(r.reprojection_error_px)[4] < 2.5 * 2
+
+
+def test_non_finite_initial_parameters_are_an_error(model, noisy):
+    bad = noisy.init.replace(body_pose=noisy.init.body_pose.at[2, 3, 0].set(jnp.nan))
+    with pytest.raises(ValueError, match="NaN or inf"):
+        fit(model, noisy.keypoints, bad)
+    with pytest.raises(ValueError, match=r"\(T, 67, 3\)"):
+        fit(model, noisy.keypoints[:, :25], noisy.init)
+
+
+# ---- IK -----------------------------------------------------------------------------------------------------
+
+def test_ik_recovers_joint_rotations_from_3d_joints(model):
+    rng = np.random.default_rng(3)
+    n = 16
+    theta = synthetic.random_pose(rng, n)
+    betas = np.zeros((n, model.num_betas), np.float32)
+    index = [i for i in range(76) if i not in (22, 23, 24)]  # skeleton and vertex joints (not jaw, eyes)
+    joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(
+        model, fitting.params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression)))[:, index]
+    start = theta + rng.normal(0, 0.1, theta.shape).astype(np.float32)
+    free = tuple(j not in (22, 23, 24) for j in range(55))
+    fitted, _, cam, ok = ik(model, index, joints, np.ones(joints.shape[:2]), start, betas, free)
+    assert np.all(np.asarray(ok))
+    rot = lambda a: rotations.rotvec_to_rotmat(jnp.asarray(a))  # noqa: E731
+    err, err0 = _geodesic(rot(fitted), rot(theta))[:, list(free)], _geodesic(rot(start), rot(theta))[:, list(free)]
+    assert np.median(err) < 0.6 * np.median(err0), (np.median(err), np.median(err0))
+    assert np.median(err[:, 0]) < 0.02  # the root is fully determined by the hips and spine
+    np.testing.assert_allclose(np.asarray(cam)[:, 0], 1.0, atol=0.01)
+
+
+# ---- smoothing ----------------------------------------------------------------------------------------------
+
+def test_smoothing_rotations_near_pi_is_rotation_safe():
+    # rotations within 0.05 rad of pi about x, whose axis-angles flip sign from frame to frame
+    angles = np.pi - 0.02 + 0.01 * np.sin(np.arange(12))
+    rotvecs = np.stack([angles, np.zeros(12), np.zeros(12)], 1) * np.where(np.arange(12) % 2, 1, -1)[:, None]
+    rotvecs = jnp.asarray(rotvecs, jnp.float32)
+    out = _SMOOTH_ROTVECS(rotvecs, jnp.ones(12, bool))
+    assert _geodesic(rotations.rotvec_to_rotmat(out), rotations.rotvec_to_rotmat(rotvecs)).max() < 0.05
+    # what averaging raw axis-angles would have done: rotations near zero, ~pi away
+    naive = np.stack([np.convolve(rotvecs[:, 0], [0.1, 0.2, 0.5, 0.2, 0.1], mode="same"), np.zeros(12),
+                      np.zeros(12)], 1)
+    naive_err = _geodesic(rotations.rotvec_to_rotmat(jnp.asarray(naive, jnp.float32)),
+                          rotations.rotvec_to_rotmat(rotvecs))
+    assert naive_err[2:-2].min() > 1.5
+
+
+def test_smoothing_keeps_constant_motion_and_reduces_jitter(model):
+    p = random_params(4, 1, max_angle=1.0)
+    const = jax.tree.map(lambda a: jnp.repeat(a, 20, 0), p)
+    out = _SMOOTH_PARAMS(const, jnp.ones(20, bool))
+    np.testing.assert_allclose(out.body_pose, const.body_pose, atol=2e-5)
+    rng = np.random.default_rng(5)
+    noisy = const.replace(body_pose=const.body_pose + jnp.asarray(rng.normal(0, 0.05, (20, 21, 3)), jnp.float32))
+    valid = jnp.ones(20, bool).at[7].set(False)
+    out = _SMOOTH_PARAMS(noisy, valid)
+    assert float(jnp.abs(out.body_pose - const.body_pose).mean()) < 0.7 * float(jnp.abs(noisy.body_pose -
+                                                                                      const.body_pose).mean())
+    np.testing.assert_array_equal(out.body_pose[7], noisy.body_pose[7])  # invalid frames are left alone
+
+
+# ---- motion.npz and the command line ------------------------------------------------------------------------
+
+def test_fit_command_writes_a_motion_file_that_smplx_reproduces(model, noisy, default_model_dir, tmp_path):
+    kp_dir = tmp_path / "keypoints"
+    kp_dir.mkdir()
+    for i in range(T):
+        people = noisy.keypoints[i:i + 1] if i != 5 else np.zeros((0, 67, 3))
+        write_openpose_json(kp_dir / json_name("clip", i), people)
+    assert main(["fit", str(kp_dir), "--out", str(tmp_path / "first"), "--quiet"]) == 0
+    with np.load(tmp_path / "first" / "motion.npz") as first:  # from the default start, keypoints alone
+        assert np.median(first["reprojection_error_px"][first["valid"]]) < 2.5
+    # from that motion, smoothed (the synthetic frames are unrelated poses, so smoothing moves them a lot)
+    assert main(["fit", str(kp_dir), "--out", str(tmp_path / "out"), "--quiet", "--smooth", "--init",
+                 str(tmp_path / "first" / "motion.npz"), "--image-size", "1000", "1000", "--fps", "25"]) == 0
+    path = tmp_path / "out" / "motion.npz"
+    with np.load(path) as f:
+        data = {k: f[k] for k in f.files}
+    shapes = dict(global_orient=(T, 3), body_pose=(T, 21, 3), left_hand_pose=(T, 15, 3), right_hand_pose=(T, 15, 3),
+                  jaw_pose=(T, 3), betas=(T, 10), transl=(T, 3), camera_scale=(T,), camera_trans=(T, 2), valid=(T,),
+                  keypoints_2d=(T, 67, 3), reprojection_error_px=(T,), fps=(), image_size=(2,), model_sha256=())
+    assert set(data) == set(shapes)
+    for k, shape in shapes.items():
+        assert data[k].shape == shape, k
+    assert data["valid"].dtype == bool and not data["valid"][5] and data["valid"].sum() == T - 1
+    assert data["fps"] == 25 and data["model_sha256"].dtype.kind == "U" and len(str(data["model_sha256"])) == 64
+    assert np.all(np.isfinite(data["reprojection_error_px"]))
+    assert data["image_size"].tolist() == [1000, 1000]
+
+    body = smplx.create(str(default_model_dir), model_type="smplx", use_pca=False, flat_hand_mean=True,
+                        batch_size=T)
+    t = lambda k: torch.tensor(data[k]).reshape(T, -1)  # noqa: E731
+    with torch.no_grad():
+        joints = body(global_orient=t("global_orient"), body_pose=t("body_pose"), left_hand_pose=t("left_hand_pose"),
+                      right_hand_pose=t("right_hand_pose"), jaw_pose=t("jaw_pose"), betas=t("betas"),
+                      transl=t("transl")).joints.numpy()
+    pix = data["camera_scale"][:, None, None] * joints[:, list(constants.OPENPOSE67_FROM_SMPLX), :2] \
+        + data["camera_trans"][:, None]
+    seen = data["keypoints_2d"][..., 2] > 0
+    dist = np.where(seen, np.linalg.norm(pix - data["keypoints_2d"][..., :2], axis=-1), 0)
+    torch_error = dist.sum(1) / np.maximum(seen.sum(1), 1)
+    np.testing.assert_allclose(torch_error, data["reprojection_error_px"], atol=0.01)
+
+    params = motion_params(read_motion(path))
+    ours = synthetic.openpose_projection(model, params, data["camera_scale"], data["camera_trans"])
+    assert np.abs(ours - pix).max() <= 0.01
+
+
+def test_image_size_is_inferred_from_the_keypoints():
+    kp = np.zeros((2, 67, 3), np.float32)
+    kp[0, 3] = (640.2, 100, 1)
+    kp[1, 9] = (10, 479.0, 1)
+    kp[1, 10] = (5000, 5000, 0)  # missing points do not count
+    assert infer_image_size(kp) == (642, 480)
+
+
+def test_fit_command_errors_are_one_line(tmp_path, capsys):
+    assert main(["fit", str(tmp_path / "missing"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "missing" in err
+    (tmp_path / "kp").mkdir()
+    (tmp_path / "kp" / "a_keypoints.json").write_text("{not json")
+    assert main(["fit", str(tmp_path / "kp"), "--out", str(tmp_path / "out")]) == 2
+    assert "a_keypoints.json" in capsys.readouterr().err
