@@ -1,5 +1,7 @@
 """The overlay video: each frame with the posed mesh drawn over it, beside a side view of the same mesh."""
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
@@ -21,18 +23,21 @@ def mesh_over_frame(frame: np.ndarray, vertices: np.ndarray, faces: np.ndarray, 
 
 
 def side_view(vertices: np.ndarray, faces: np.ndarray, size: tuple[int, int], pixels_per_metre: float,
-              centre: np.ndarray) -> np.ndarray:
-    """The mesh seen from the person's side (the image's x axis turned into depth), on a plain background."""
+              centre: np.ndarray, detail: float = 0.5) -> np.ndarray:
+    """The mesh seen from the person's side (the image's x axis turned into depth), on a plain background;
+    rendered at ``detail`` times the size and scaled up (rasterising cost grows with the pixels covered)."""
     width, height = size
-    turned = (vertices - centre) @ _TURN.T
-    points = np.concatenate([turned[:, :2] * pixels_per_metre + [width / 2, height / 2],
-                             turned[:, 2:] * pixels_per_metre], axis=1)
-    return draw_mesh(np.full((height, width, 3), 235, np.uint8), points, faces)
+    small = (max(1, round(width * detail)), max(1, round(height * detail)))
+    turned = (vertices - centre) @ _TURN.T * (pixels_per_metre * detail)
+    points = np.concatenate([turned[:, :2] + [small[0] / 2, small[1] / 2], turned[:, 2:]], axis=1)
+    image = draw_mesh(np.full((small[1], small[0], 3), 235, np.uint8), points, faces)
+    return cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
 
 
 class OverlayWriter:
     """Writes the side-by-side overlay video (``mp4v``), the frames scaled so that the height is at most
-    ``max_height``; the side view keeps the first frame's scale and follows the body's centre."""
+    ``max_height``; the side view keeps the first frame's scale and follows the body's centre. Frames are
+    composed in parallel threads (the rasteriser's numpy work releases the GIL)."""
 
     def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, max_height: int = 960):
         width, height = frame_size
@@ -44,22 +49,33 @@ class OverlayWriter:
         if not self.writer.isOpened():
             raise OSError(f"cannot write the overlay video {self.path}")
         self.pixels_per_metre = None
+        self.pool = ThreadPoolExecutor(os.cpu_count() or 1)
 
-    def write(self, frame, vertices=None, faces=None, camera_scale=None, camera_trans=None) -> None:
-        """One frame; without vertices (no person) the frame is shown as it is beside an empty side view."""
+    def compose(self, frame, vertices=None, faces=None, camera_scale=None, camera_trans=None) -> np.ndarray:
+        """One output image; without vertices (no person) the frame as it is beside an empty side view."""
         if vertices is None:
             left = cv2.resize(frame, self.panel, interpolation=cv2.INTER_AREA)
             right = np.full((self.panel[1], self.panel[0], 3), 235, np.uint8)
         else:
-            left = cv2.resize(mesh_over_frame(frame, vertices, faces, camera_scale, camera_trans, self.scale),
-                              self.panel)
+            left = mesh_over_frame(frame, vertices, faces, camera_scale, camera_trans, self.scale)
+            if left.shape[1::-1] != self.panel:
+                left = cv2.resize(left, self.panel)
             lo, hi = vertices.min(axis=0), vertices.max(axis=0)
             if self.pixels_per_metre is None:
                 self.pixels_per_metre = 0.75 * self.panel[1] / (hi - lo).max()
             right = side_view(vertices, faces, self.panel, self.pixels_per_metre, (lo + hi) / 2)
-        self.writer.write(np.concatenate([left, right], axis=1))
+        return np.concatenate([left, right], axis=1)
+
+    def write(self, *frames) -> None:
+        """Frames in order, each an argument tuple of `compose`, composed in parallel threads."""
+        first = next((f for f in frames if len(f) > 1 and f[1] is not None), None)
+        if first is not None and self.pixels_per_metre is None:
+            self.compose(*first)  # fixes the side view's scale before the threads share it
+        for image in self.pool.map(lambda args: self.compose(*args), frames):
+            self.writer.write(image)
 
     def close(self) -> None:
+        self.pool.shutdown()
         self.writer.release()
 
     def __enter__(self):

@@ -20,22 +20,24 @@ def rasterize(points: np.ndarray, faces: np.ndarray, size: tuple[int, int]) -> n
     xy = tri[:, :, :2] - 0.5  # pixel centres at integer coordinates
     e1, e2 = xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]
     area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # < 0: facing the viewer (y down)
-    lo = np.maximum(np.ceil(xy.min(axis=1)), 0).astype(np.int64)
-    hi = np.minimum(np.floor(xy.max(axis=1)), [width - 1, height - 1]).astype(np.int64)
+    lo = np.maximum(np.ceil(xy.min(axis=1)), 0).astype(np.int32)
+    hi = np.minimum(np.floor(xy.max(axis=1)), [width - 1, height - 1]).astype(np.int32)
     keep = np.flatnonzero((area < 0) & np.all(hi >= lo, axis=1))
     keep = keep[np.argsort(-tri[keep, :, 2].mean(axis=1), kind="stable")]
     extent = hi[keep] - lo[keep] + 1
     count = extent[:, 0] * extent[:, 1]
-    k = np.repeat(np.arange(len(keep)), count)  # candidate pixel -> triangle (in drawing order)
-    local = np.arange(len(k)) - (np.cumsum(count) - count)[k]
-    px = lo[keep, 0][k] + local % extent[k, 0]
-    py = lo[keep, 1][k] + local // extent[k, 0]
-    rx, ry = px - xy[keep, 0, 0][k], py - xy[keep, 0, 1][k]
-    d1, d2 = e1[keep] / area[keep, None], e2[keep] / area[keep, None]
-    w1 = rx * d2[k, 1] - ry * d2[k, 0]
-    w2 = ry * d1[k, 0] - rx * d1[k, 1]
+    # one row per candidate pixel, gathered from per-triangle tables (in drawing order)
+    k = np.repeat(np.arange(len(keep), dtype=np.int32), count)
+    ints = np.stack([np.cumsum(count) - count, extent[:, 0], lo[keep, 0], lo[keep, 1]], axis=1).astype(np.int32)[k]
+    inv = 1.0 / area[keep, None]
+    floats = np.concatenate([xy[keep, 0], e1[keep] * inv, e2[keep] * inv], axis=1)[k]
+    local = np.arange(len(k), dtype=np.int32) - ints[:, 0]
+    px, py = ints[:, 2] + local % ints[:, 1], ints[:, 3] + local // ints[:, 1]
+    rx, ry = px - floats[:, 0], py - floats[:, 1]
+    w1 = rx * floats[:, 5] - ry * floats[:, 4]
+    w2 = ry * floats[:, 2] - rx * floats[:, 3]
     inside = (w1 >= 0) & (w2 >= 0) & (w1 + w2 <= 1)
-    ids = np.full(height * width, -1, np.int64)
+    ids = np.full(height * width, -1, np.int32)
     ids[(py * width + px)[inside]] = keep[k[inside]]  # later (nearer) triangles overwrite
     return ids.reshape(height, width)
 

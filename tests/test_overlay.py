@@ -41,13 +41,9 @@ def test_overlay_video_frames_and_size(default_model_dir, tmp_path):
     cap = cv2.VideoCapture(str(CLIP))
     path = tmp_path / "overlay.mp4"
     with OverlayWriter(path, (1080, 1920), fps=30.0) as writer:
-        for k in range(5):
-            ok, frame = cap.read()
-            assert ok
-            if k == 2:
-                writer.write(frame)  # a frame without a person
-            else:
-                writer.write(frame, vertices, np.asarray(model.faces), 700.0, np.array([540.0, 900.0]))
+        frames = [cap.read()[1] for _ in range(5)]
+        posed = (np.asarray(model.faces), 700.0, np.array([540.0, 900.0]))
+        writer.write(*[(frame,) if k == 2 else (frame, vertices, *posed) for k, frame in enumerate(frames)])
     video = cv2.VideoCapture(str(path))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
     ok, first = video.read()
