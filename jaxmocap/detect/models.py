@@ -8,7 +8,6 @@ them). We download that wheel with pip (no install), extract the members, check 
 
 from __future__ import annotations
 
-import hashlib
 import os
 import subprocess
 import sys
@@ -19,6 +18,7 @@ from pathlib import Path
 from smplx_jax.default_model import cache_root
 
 from ..errors import InputError
+from ..io import file_sha256
 
 MEDIAPIPE_VERSION = "0.10.21"
 
@@ -52,17 +52,9 @@ def cache_dir() -> Path:
     return cache_root() / f"mediapipe-{MEDIAPIPE_VERSION}"
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _check(path: Path, name: str) -> Path:
     expected = MODEL_FILES[name][1]
-    actual = _sha256(path)
+    actual = file_sha256(path)
     if actual != expected:
         raise ModelFileError(
             f"model file {path} is corrupt (sha256 {actual[:12]}…, expected {expected[:12]}…); "

@@ -2,7 +2,6 @@
 ``body.npz`` (one array per variable, named like the PyTorch checkpoints, read with ``allow_pickle=False``)."""
 
 import dataclasses
-import hashlib
 import json
 import zipfile
 from pathlib import Path
@@ -13,6 +12,7 @@ import numpy as np
 from flax import nnx
 
 from jaxmocap.errors import InputError
+from jaxmocap.io import file_sha256
 from jaxmocap.regressors.body import BodyConfig, BodyRegressor
 from jaxmocap.regressors.hand import HandConfig, HandRegressor
 
@@ -67,7 +67,7 @@ def save(out_dir: Path, regressors: Regressors, sources: dict[str, str]) -> list
         tmp = path.with_suffix(".tmp.npz")
         np.savez(tmp, **arrays)
         tmp.replace(path)
-        index[kind] = dict(file=path.name, sha256=_sha256(path), config=dataclasses.asdict(module.config),
+        index[kind] = dict(file=path.name, sha256=file_sha256(path), config=dataclasses.asdict(module.config),
                            source=sources.get(kind, ""))
         written.append(path)
     (out_dir / INDEX).write_text(json.dumps(index, indent=2) + "\n")
@@ -101,7 +101,7 @@ def load(directory: str | Path, *, dtype=None) -> Regressors:
         except TypeError as err:
             raise WeightsError(f"{index_path}: bad '{kind}' config ({err})") from None
         path = directory / str(entry["file"])
-        if not path.is_file() or _sha256(path) != entry["sha256"]:
+        if not path.is_file() or file_sha256(path) != entry["sha256"]:
             raise WeightsError(f"{path}: missing or does not match the checksum in {INDEX}")
         try:
             with np.load(path, allow_pickle=False) as npz:
@@ -110,10 +110,6 @@ def load(directory: str | Path, *, dtype=None) -> Regressors:
             raise WeightsError(f"{path}: cannot read ({err})") from None
         modules[kind] = build(kind, config, arrays, str(path), dtype=dtype)
     return Regressors(**modules)
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def _few(keys: list[str], n: int = 4) -> str:
