@@ -34,7 +34,7 @@ def _cmd_run(args):
 
     exports = tuple(f for f in args.export.split(",") if f) if args.export else ()
     _print_report(run(args.input, args.out, model_path=args.model, weights=args.weights, integration=args.integration,
-                      start=args.start, end=args.end, stride=args.stride,
+                      keypoints_dir=args.keypoints, start=args.start, end=args.end, stride=args.stride,
                       chunk_size=args.chunk, iterations=args.iterations, smooth=not args.no_smooth,
                       overlay=not args.no_overlay, exports=exports, progress=not args.quiet))
 
@@ -97,6 +97,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--weights", type=Path, default=None, help="FrankMocap regressors from convert-frankmocap")
     p.add_argument("--integration", choices=("optimize", "copy-paste"), default="optimize",
                    help="how body and hands are merged (copy-paste needs --weights; default: %(default)s)")
+    p.add_argument("--keypoints", type=Path, default=None,
+                   help="OpenPose JSON folder to fit to instead of the detector's 2D keypoints")
     p.add_argument("--start", type=int, default=0, help="first frame (default: 0)")
     p.add_argument("--end", type=int, default=None, help="stop before this frame")
     p.add_argument("--stride", type=int, default=1, help="use every n-th frame (default: 1)")

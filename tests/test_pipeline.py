@@ -149,3 +149,24 @@ def test_weights_of_another_architecture_are_refused(tmp_path, capsys):
     code = main(["run", str(CLIP), "--weights", str(tmp_path / "weights"), "--out", str(tmp_path / "o"), "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "regressors.json" in err
+
+
+def test_given_keypoints_replace_the_detectors(result, tmp_path):
+    """--keypoints: OpenPose JSON (here the run's own detections moved 30 px right) are the fit's targets."""
+    out, _ = result
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    for path in (out / "keypoints").iterdir():
+        doc = json.loads(path.read_text())
+        for person in doc["people"]:
+            for key in ("pose_keypoints_2d", "hand_left_keypoints_2d", "hand_right_keypoints_2d"):
+                flat = person[key]
+                person[key] = [v + 30.0 if k % 3 == 0 and flat[k + 2] > 0 else v for k, v in enumerate(flat)]
+        (moved / path.name).write_text(json.dumps(doc))
+    report = pipeline_run.run(CLIP, tmp_path / "out", keypoints_dir=moved, start=20, end=20 + FRAMES,
+                              chunk_size=CHUNK, overlay=False, progress=False)
+    original, shifted = read_motion(out / "motion.npz"), read_motion(report.motion)
+    seen = original["keypoints_2d"][..., 2] > 0
+    np.testing.assert_allclose(shifted["keypoints_2d"][..., 0][seen], original["keypoints_2d"][..., 0][seen] + 30,
+                               atol=1e-2)
+    assert np.median(shifted["camera_trans"][:, 0] - original["camera_trans"][:, 0]) > 20

@@ -8,6 +8,8 @@ stopped and ends with the same ``motion.npz`` as an uninterrupted one (the detec
 chunk, in both cases).
 """
 
+import dataclasses
+import re
 import time
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -23,6 +25,7 @@ from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.errors import InputError
 from jaxmocap.integrate import body_from_blazepose, fit, fitted_motion, hand_into_body
 from jaxmocap.integrate.fitting import params_from_full_pose
+from jaxmocap.integrate.folder import read_keypoint_folder
 from jaxmocap.io import file_sha256
 from jaxmocap.media import open_media
 from jaxmocap.motion import write_motion
@@ -64,13 +67,24 @@ def _solve(model, obs, iterations, seconds):
                      "valid": obs.found & np.asarray(result.valid)}
 
 
-def run(source, out_dir, *, model_path=None, weights=None, integration: str = "optimize", start: int = 0,
+def _keypoints_by_frame(folder) -> dict[int, np.ndarray]:
+    """OpenPose JSON of one tracked person by frame number (from ``<stem>_<frame:012d>_keypoints.json`` names,
+    else by sorted order)."""
+    files, keypoints = read_keypoint_folder(folder)
+    numbers = [re.search(r"_(\d{12})_keypoints\.json$", f.name) for f in files]
+    frames = [int(m.group(1)) for m in numbers] if all(numbers) else range(len(files))
+    return dict(zip(frames, np.where(np.isfinite(keypoints), keypoints, 0.0)))
+
+
+def run(source, out_dir, *, model_path=None, weights=None, integration: str = "optimize", keypoints_dir=None,
+        start: int = 0,
         end: int | None = None, stride: int = 1, chunk_size: int = 128, iterations: int = 20, smooth: bool = True,
         overlay: bool = True, exports: tuple[str, ...] = (), progress: bool = True) -> RunReport:
     """Run over ``source`` and write ``out_dir/motion.npz`` (DESIGN 2.3), the detections as OpenPose JSON in
     ``out_dir/keypoints/``, ``out_dir/overlay.mp4`` and the requested exports. Without ``weights`` the embedded
     default path; with ``weights`` (from ``convert-frankmocap``) FrankMocap's regressors, copy-and-paste and, for
-    ``integration="optimize"``, the fit."""
+    ``integration="optimize"``, the fit. ``keypoints_dir``: OpenPose JSON (e.g. from OpenPose itself) to fit to
+    instead of the detector's 2D keypoints."""
     from tqdm import tqdm
 
     if integration not in ("optimize", "copy-paste"):
@@ -86,13 +100,15 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
     model = smplx_jax.load_model(model_path)
     model_sha = file_sha256(model_path)
     regression = Regression.load(weights, model) if weights is not None else None
+    given = _keypoints_by_frame(keypoints_dir) if keypoints_dir is not None else None
     media, frames = open_media(source, start, end, stride)
     still = media.kind in ("image", "images")
     source_id = str(Path(source).resolve()) if not str(source).isdigit() else str(source)
     store = ChunkStore(out_dir, dict(version=SETTINGS_VERSION, source=source_id, start=start, end=end, stride=stride,
                                      chunk=chunk_size, iterations=iterations, model=model_sha,
                                      weights=weights and file_sha256(Path(weights) / "regressors.json"),
-                                     integration=integration))
+                                     integration=integration,
+                                     keypoints=keypoints_dir and str(Path(keypoints_dir).resolve())))
     detector = Detector(static_image_mode=still)
     report = RunReport(out_dir / "motion.npz", 0, 0)
     seconds = report.seconds
@@ -112,6 +128,8 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
             t0 = time.perf_counter()
             detector.reset()
             obs = observe(detector, [frame for _, frame in batch])
+            if given is not None:
+                obs = dataclasses.replace(obs, keypoints=np.stack([given.get(i, np.zeros((67, 3))) for i in ids]))
             seconds["detect"] += time.perf_counter() - t0
             if regression is None:
                 solved = _solve(model, obs, iterations, seconds)
