@@ -1,9 +1,11 @@
-"""End-to-end speed of ``jaxmocap run`` (embedded default path) on the bundled clip, with a per-stage breakdown.
+"""End-to-end speed of ``jaxmocap run`` on the bundled clip, with a per-stage breakdown: the embedded default
+path, and the FrankMocap path (regressors with random weights of the real architecture, copy-and-paste).
 
     python bench/pipeline.py [--out bench/results] [--quick]      (or: jaxmocap bench --only pipeline)
 
-The clip is run twice in one process: the first run includes JAX compilation (what a first ``jaxmocap demo``
-costs); the second is the steady state. Overlay rendering and exports are timed as stages of their own.
+Each path runs twice in one process: the first run includes JAX compilation (what a first ``jaxmocap demo``
+costs); the second is the steady state (``--quick``: first runs only). Overlay rendering and exports are timed
+as stages of their own.
 """
 
 import argparse
@@ -22,23 +24,31 @@ def main():
     parser.add_argument("--quick", action="store_true", help="one run (compilation included)")
     args = parser.parse_args()
 
+    from flax import nnx
+
     from jaxmocap.pipeline import run
+    from jaxmocap.regressors import BodyRegressor, HandRegressor, Regressors
+    from jaxmocap.regressors.weights import save
 
     rows = []
-    for name in ("first run (compiles)",) + (() if args.quick else ("steady state",)):
-        with tempfile.TemporaryDirectory() as tmp:
-            report = run(CLIP, tmp, exports=("bvh", "gltf"), progress=False)
-        seconds = dict(report.seconds)
-        total = sum(seconds.values())
-        rows.append(dict(run=name, frames=report.frames, seconds=total, fps=report.frames / total, stages=seconds))
+    with tempfile.TemporaryDirectory() as weights:
+        save(Path(weights), Regressors(HandRegressor(rngs=nnx.Rngs(0)), BodyRegressor(rngs=nnx.Rngs(1))), {})
+        for path, options in (("default", {}), ("regressors", dict(weights=weights, integration="copy-paste"))):
+            for name in ("first run",) + (() if args.quick else ("steady",)):
+                with tempfile.TemporaryDirectory() as tmp:
+                    report = run(CLIP, tmp, exports=("bvh", "gltf"), progress=False, **options)
+                seconds = dict(report.seconds)
+                total = sum(seconds.values())
+                rows.append(dict(run=f"{path}, {name}", frames=report.frames, seconds=total,
+                                 fps=report.frames / total, stages=seconds))
 
-    stages = list(rows[0]["stages"])
+    stages = list(dict.fromkeys(s for r in rows for s in r["stages"]))
     print(f"\njaxmocap run, {CLIP.name} (1080x1920, {rows[0]['frames']} frames), {os.cpu_count()} CPUs, "
           f"{platform.machine()}")
-    print(f"{'':<22}{'frames/s':>9}{'total s':>9}" + "".join(f"{s:>14}" for s in stages))
+    print(f"{'':<22}{'frames/s':>9}{'total s':>9}" + "".join(f"{s:>18}" for s in stages))
     for r in rows:
         print(f"{r['run']:<22}{r['fps']:>9.1f}{r['seconds']:>9.1f}" + "".join(
-            f"{r['stages'].get(s, 0.0) * 1000 / r['frames']:>11.1f} ms" for s in stages))
+            f"{r['stages'].get(s, 0.0) * 1000 / r['frames']:>15.1f} ms" for s in stages))
     print("(stage columns: milliseconds per frame)")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "pipeline.json").write_text(json.dumps(dict(benchmark="pipeline", cpus=os.cpu_count(), rows=rows),

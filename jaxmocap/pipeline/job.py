@@ -141,7 +141,7 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
             stored = solved | {"keypoints_2d": obs.keypoints, "frame_index": np.asarray(ids)}
             store.save(index, stored)
             for n, frame_id in enumerate(ids):
-                name = json_name(media.stems[frame_id - start] if still else media.stem, None if still else frame_id)
+                name = json_name(media.stems[len(frame_ids) + n], None) if still else json_name(media.stem, frame_id)
                 write_openpose_json(out_dir / "keypoints" / name, obs.keypoints[n][None] if obs.found[n] else
                                     np.zeros((0, 67, 3)))
         chunks.append(stored)
