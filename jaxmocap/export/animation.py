@@ -8,9 +8,11 @@ assumed focal length in pixels (default: the image diagonal, a ~53 degree field 
 
 from dataclasses import dataclass
 
+import jax
 import numpy as np
 
 import smplx_jax
+from jaxmocap.motion import motion_params
 from smplx_jax import constants
 from smplx_jax.rotations import rotvec_to_rotmat
 
@@ -40,16 +42,6 @@ def _held(valid: np.ndarray) -> np.ndarray:
     return np.where(index < 0, np.argmax(valid), index)
 
 
-def full_pose(motion) -> np.ndarray:
-    """(T, 55, 3) axis-angle in SMPL-X joint order; the eyes at rest (motion.npz keeps no eye pose)."""
-    t = len(motion["global_orient"])
-    eyes = np.zeros((t, 2, 3))
-    return np.concatenate([
-        motion["global_orient"][:, None], motion["body_pose"], motion["jaw_pose"][:, None], eyes,
-        motion["left_hand_pose"], motion["right_hand_pose"],
-    ], axis=1).astype(np.float64)
-
-
 def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None) -> Animation:
     """The world-frame animation of a motion; invalid frames hold the previous valid frame's pose."""
     valid = np.asarray(motion["valid"], bool)
@@ -57,7 +49,8 @@ def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None)
     betas = np.asarray(motion["betas"], np.float64)[valid].mean(axis=0)
     num = betas.shape[0]
     rest_joints = np.asarray(model.joint_template, np.float64) + np.asarray(model.joint_shapedirs)[..., :num] @ betas
-    local = np.asarray(rotvec_to_rotmat(full_pose(motion)[held]), np.float64)
+    full_pose = jax.vmap(smplx_jax.SMPLXParams.full_pose)(motion_params(motion, model.num_expression, held))
+    local = np.asarray(rotvec_to_rotmat(full_pose), np.float64)
     local[:, 0] = CAMERA_TO_WORLD @ local[:, 0]
 
     width, height = np.asarray(motion["image_size"], np.float64)
