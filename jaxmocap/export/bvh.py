@@ -14,7 +14,8 @@ def zyx_euler_degrees(rotmats: np.ndarray) -> np.ndarray:
     sy = -np.clip(rotmats[..., 2, 0], -1.0, 1.0)
     y = np.arcsin(sy)
     locked = np.abs(sy) > 1 - 1e-9  # gimbal lock: put all of the remaining turn into z
-    z = np.where(locked, np.arctan2(-rotmats[..., 0, 1], rotmats[..., 1, 1]), np.arctan2(rotmats[..., 1, 0], rotmats[..., 0, 0]))
+    z = np.where(locked, np.arctan2(-rotmats[..., 0, 1], rotmats[..., 1, 1]),
+                 np.arctan2(rotmats[..., 1, 0], rotmats[..., 0, 0]))
     x = np.where(locked, 0.0, np.arctan2(rotmats[..., 2, 1], rotmats[..., 2, 2]))
     return np.degrees(np.stack([z, y, x], axis=-1))
 
@@ -36,7 +37,8 @@ def _hierarchy(anim: Animation) -> tuple[list[str], list[int]]:
         for c in children[j]:
             visit(c, depth + 1)
         if not children[j]:
-            lines.extend([f"{pad}  End Site", f"{pad}  {{", f"{pad}    OFFSET 0.000000 0.000000 0.000000", f"{pad}  }}"])
+            end_site = ["End Site", "{", "  OFFSET 0.000000 0.000000 0.000000", "}"]
+            lines.extend(f"{pad}  {line}" for line in end_site)
         lines.append(f"{pad}}}")
 
     visit(0, 0)

@@ -1,5 +1,6 @@
-"""glTF 2.0 export (binary ``.glb``, or ``.gltf`` JSON): the body mesh of the motion's mean shape, skinned to the 55-joint skeleton
-(four strongest joints per vertex), with one animation; glTF viewers in browsers and Blender play it.
+"""glTF 2.0 export (binary ``.glb``, or ``.gltf`` JSON): the body mesh of the motion's mean shape, skinned to the
+55-joint skeleton (four strongest joints per vertex), with one animation; glTF viewers in browsers and Blender
+play it.
 
 Pose-corrective blend shapes are not exported (glTF skinning cannot express them); for the default body model
 they are zero, so the file reproduces the model exactly.

@@ -1,11 +1,11 @@
 """``jaxmocap run``: video (or images, or a webcam) in; whole-body SMPL-X motion, keypoints, overlay and exports out.
 
-The embedded default path (no licensed file): detector (2D keypoints and metric 3D landmarks) -> IK of body and hands from the 3D
-landmarks (hands pasted under the body's kinematics) -> optimisation integration on the 2D keypoints ->
-temporal smoothing. With FrankMocap's converted weights: body and hand regressors on the detector's boxes ->
-copy-and-paste -> optionally the same fit. Frames go in chunks; each finished chunk is stored, so an interrupted run resumes where it
-stopped and ends with the same ``motion.npz`` as an uninterrupted one (the detector starts afresh at every
-chunk, in both cases).
+The embedded default path (no licensed file): detector (2D keypoints and metric 3D landmarks) -> IK of body and
+hands from the 3D landmarks (hands pasted under the body's kinematics) -> optimisation integration on the 2D
+keypoints -> temporal smoothing. With FrankMocap's converted weights: body and hand regressors on the detector's
+boxes -> copy-and-paste -> optionally the same fit. Frames go in chunks; each finished chunk is stored, so an
+interrupted run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (the
+detector starts afresh at every chunk, in both cases).
 """
 
 import dataclasses
@@ -153,7 +153,8 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
 
     t0 = time.perf_counter()
     motion = _assemble(model, chunks, smooth)
-    motion |= {"fps": np.asarray(media.fps), "image_size": np.asarray(media.size), "model_sha256": np.asarray(model_sha)}
+    motion |= {"fps": np.asarray(media.fps), "image_size": np.asarray(media.size),
+               "model_sha256": np.asarray(model_sha)}
     write_motion(report.motion, motion)
     seconds["smooth+write"] += time.perf_counter() - t0
     report.frames, report.valid = len(frame_ids), int(motion["valid"].sum())
