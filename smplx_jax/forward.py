@@ -77,7 +77,7 @@ def _skin(weights_t, glob_rotmats, positions, rest_joints, points_cm, offset):
     blended = transforms.T @ weights_t  # (12, N)
     x, y, z = points_cm
     return jnp.stack([blended[3 * c] * x + blended[3 * c + 1] * y + blended[3 * c + 2] * z + blended[9 + c] + offset[c]
-                      for c in range(3)], axis=-1)
+                      for c in range(3)]).T  # stacked coordinate-major, then transposed: faster than interleaving
 
 
 def _posed_points(template_cm, shapedirs_cm, posedirs_cm, shape, rel_rotmats):
