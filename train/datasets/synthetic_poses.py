@@ -1,0 +1,101 @@
+"""Random plausible SMPL-X parameters for the synthetic datasets (numpy, one example per call)."""
+
+import numpy as np
+from jaxtyping import Float
+
+from smplx_jax import constants
+
+# Per-axis limits (radians) of the body joints' local axis-angle, SMPL-X frame (x: the body's left, y: up,
+# z: forward). Left-side joints; the right side mirrors them (y and z negated).
+_J = {name: i for i, name in enumerate(constants.JOINT_NAMES)}
+_LEFT_LIMITS = {
+    "hip": ((-1.6, 0.4), (-0.5, 0.5), (-0.2, 0.7)),
+    "knee": ((0.0, 2.0), (-0.05, 0.05), (-0.05, 0.05)),
+    "ankle": ((-0.4, 0.5), (-0.2, 0.2), (-0.2, 0.2)),
+    "foot": ((-0.1, 0.1), (-0.1, 0.1), (-0.1, 0.1)),
+    "collar": ((-0.1, 0.1), (-0.2, 0.2), (-0.3, 0.2)),
+    "shoulder": ((-0.8, 0.8), (-1.3, 0.5), (-1.4, 0.6)),
+    "elbow": ((-0.3, 0.3), (-2.3, 0.0), (-0.1, 0.1)),
+    "wrist": ((-0.5, 0.5), (-0.4, 0.4), (-0.6, 0.6)),
+}
+_CENTRE_LIMITS = {
+    "spine1": ((-0.3, 0.6), (-0.3, 0.3), (-0.2, 0.2)),
+    "spine2": ((-0.2, 0.3), (-0.2, 0.2), (-0.15, 0.15)),
+    "spine3": ((-0.2, 0.3), (-0.2, 0.2), (-0.15, 0.15)),
+    "neck": ((-0.4, 0.5), (-0.5, 0.5), (-0.3, 0.3)),
+    "head": ((-0.4, 0.5), (-0.6, 0.6), (-0.3, 0.3)),
+}
+
+
+def _body_limits() -> Float[np.ndarray, "21 3 2"]:
+    limits = np.zeros((22, 3, 2))
+    for name, lim in _CENTRE_LIMITS.items():
+        limits[_J[name]] = lim
+    for name, lim in _LEFT_LIMITS.items():
+        limits[_J[f"left_{name}"]] = lim
+        mirrored = np.array(lim) * [[1], [-1], [-1]]
+        limits[_J[f"right_{name}"]] = np.sort(mirrored, axis=1)
+    return limits[1:]
+
+
+BODY_POSE_LIMITS = _body_limits()
+_CAMERA_FROM_MODEL = np.diag([1.0, -1.0, -1.0])  # y up, facing +z  ->  y down, facing the camera
+
+
+def rotmat_to_rotvec(rotmat: Float[np.ndarray, "3 3"]) -> Float[np.ndarray, "3"]:
+    """Axis-angle of a rotation matrix (angle in [0, pi])."""
+    angle = np.arccos(np.clip((np.trace(rotmat) - 1) / 2, -1.0, 1.0))
+    axis = np.array([rotmat[2, 1] - rotmat[1, 2], rotmat[0, 2] - rotmat[2, 0], rotmat[1, 0] - rotmat[0, 1]])
+    if angle < 1e-6:
+        return axis / 2
+    if angle > np.pi - 1e-4:  # axis from the symmetric part
+        sym = (rotmat + np.eye(3)) / 2
+        axis = sym[np.argmax(np.diag(sym))]
+        return angle * axis / np.linalg.norm(axis)
+    return angle * axis / (2 * np.sin(angle))
+
+
+def rotvec_to_rotmat(rotvec: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
+    angle = np.linalg.norm(rotvec)
+    if angle < 1e-12:
+        return np.eye(3)
+    k = np.cross(np.eye(3), rotvec / angle)  # skew matrix, row-wise
+    return np.eye(3) + np.sin(angle) * k.T + (1 - np.cos(angle)) * (k.T @ k.T)
+
+
+def random_rotation(rng: np.random.Generator) -> Float[np.ndarray, "3 3"]:
+    """Uniform on SO(3) (normalised Gaussian quaternion)."""
+    q = rng.normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def random_hand_pose(
+    rng: np.random.Generator, mean: Float[np.ndarray, "45"], components: Float[np.ndarray, "C 45"]
+) -> Float[np.ndarray, "15 3"]:
+    """Absolute finger axis-angles ``mean + coeffs @ components[:6]`` (``hand_pose_from_pca``) with coefficients
+    of decreasing spread, plus a little per-joint noise; each joint's rotation is capped at 1.8 rad."""
+    spread = np.array([1.1, 0.6, 0.45, 0.35, 0.3, 0.25])[: len(components)]
+    coeffs = rng.normal(0.0, spread)
+    pose = (mean + coeffs @ components[: len(spread)]).reshape(15, 3) + rng.normal(0.0, 0.05, (15, 3))
+    angle = np.linalg.norm(pose, axis=1, keepdims=True)
+    return pose * np.minimum(1.0, 1.8 / np.maximum(angle, 1e-12))
+
+
+def random_body_pose(rng: np.random.Generator) -> Float[np.ndarray, "21 3"]:
+    """Per-joint axis-angle drawn within `BODY_POSE_LIMITS`, scaled towards rest by a random amount."""
+    lo, hi = BODY_POSE_LIMITS[..., 0], BODY_POSE_LIMITS[..., 1]
+    pose = rng.uniform(lo, hi)
+    return pose * rng.uniform(0.3, 1.0)
+
+
+def random_body_orientation(rng: np.random.Generator) -> Float[np.ndarray, "3 3"]:
+    """Camera-frame global rotation of a mostly upright body at a random yaw."""
+    yaw = rng.uniform(0, 2 * np.pi)
+    turn = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
+    tilt = rotvec_to_rotmat(rng.normal(0.0, 0.12, 3) * [1, 0, 1])
+    return _CAMERA_FROM_MODEL @ tilt @ turn
