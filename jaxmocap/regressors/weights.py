@@ -12,7 +12,7 @@ import numpy as np
 from flax import nnx
 
 from jaxmocap.errors import InputError
-from jaxmocap.io import file_sha256
+from jaxmocap.io import atomic_write_text, file_sha256
 from jaxmocap.regressors.body import BodyConfig, BodyRegressor
 from jaxmocap.regressors.hand import HandConfig, HandRegressor
 
@@ -54,13 +54,15 @@ def build(kind: str, config, arrays: dict[str, np.ndarray], source: str, *, dtyp
     return nnx.merge(graphdef, nnx.from_flat_state(leaves))
 
 
-def save(out_dir: Path, regressors: Regressors, sources: dict[str, str]) -> list[Path]:
-    """Write both networks and the index; returns the files written."""
+def save(out_dir: Path, networks: Regressors | dict[str, nnx.Module], sources: dict[str, str]) -> list[Path]:
+    """Write the networks (both `Regressors`, or e.g. ``{"hand": net}`` from training) and the index; returns the
+    files written."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    networks = networks._asdict() if isinstance(networks, Regressors) else dict(networks)
     index = dict(format=FORMAT, version=VERSION)
     written = []
-    for kind, module in regressors._asdict().items():
+    for kind, module in networks.items():
         _, state = nnx.split(module)
         arrays = {".".join(map(str, p)): np.asarray(v[...], np.float32) for p, v in nnx.to_flat_state(state)}
         path = out_dir / f"{kind}.npz"
@@ -70,7 +72,7 @@ def save(out_dir: Path, regressors: Regressors, sources: dict[str, str]) -> list
         index[kind] = dict(file=path.name, sha256=file_sha256(path), config=dataclasses.asdict(module.config),
                            source=sources.get(kind, ""))
         written.append(path)
-    (out_dir / INDEX).write_text(json.dumps(index, indent=2) + "\n")
+    atomic_write_text(out_dir / INDEX, json.dumps(index, indent=2) + "\n")
     return written + [out_dir / INDEX]
 
 
@@ -79,7 +81,18 @@ def load(directory: str | Path, *, dtype=None) -> Regressors:
 
     ``dtype`` is the compute dtype (e.g. ``jnp.bfloat16``); weights stay float32.
     """
-    directory = Path(directory)
+    index = _index(Path(directory))
+    return Regressors(**{kind: _network(Path(directory), index, kind, dtype) for kind in _KINDS})
+
+
+def load_network(directory: str | Path, kind: str, *, dtype=None) -> nnx.Module:
+    """One network (``kind`` "hand" or "body") from a weights folder, e.g. one written by training."""
+    if kind not in _KINDS:
+        raise ValueError(f"kind: expected one of {sorted(_KINDS)}, got {kind!r}")
+    return _network(Path(directory), _index(Path(directory)), kind, dtype)
+
+
+def _index(directory: Path) -> dict:
     index_path = directory / INDEX
     if not index_path.is_file():
         raise WeightsError(f"{directory}: no {INDEX}; create the folder with "
@@ -91,25 +104,26 @@ def load(directory: str | Path, *, dtype=None) -> Regressors:
     if index.get("format") != FORMAT or index.get("version") != VERSION:
         raise WeightsError(f"{index_path}: expected format {FORMAT} version {VERSION}, "
                            f"got {index.get('format')} version {index.get('version')}")
-    modules = {}
-    for kind, (_, config_cls) in _KINDS.items():
-        entry = index.get(kind)
-        if not isinstance(entry, dict) or not {"file", "sha256", "config"} <= set(entry):
-            raise WeightsError(f"{index_path}: no complete '{kind}' entry (file, sha256, config)")
-        try:
-            config = config_cls(**entry["config"])
-        except TypeError as err:
-            raise WeightsError(f"{index_path}: bad '{kind}' config ({err})") from None
-        path = directory / str(entry["file"])
-        if not path.is_file() or file_sha256(path) != entry["sha256"]:
-            raise WeightsError(f"{path}: missing or does not match the checksum in {INDEX}")
-        try:
-            with np.load(path, allow_pickle=False) as npz:
-                arrays = {name: npz[name] for name in npz.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
-            raise WeightsError(f"{path}: cannot read ({err})") from None
-        modules[kind] = build(kind, config, arrays, str(path), dtype=dtype)
-    return Regressors(**modules)
+    return index
+
+
+def _network(directory: Path, index: dict, kind: str, dtype) -> nnx.Module:
+    entry = index.get(kind)
+    if not isinstance(entry, dict) or not {"file", "sha256", "config"} <= set(entry):
+        raise WeightsError(f"{directory / INDEX}: no complete '{kind}' entry (file, sha256, config)")
+    try:
+        config = _KINDS[kind][1](**entry["config"])
+    except TypeError as err:
+        raise WeightsError(f"{directory / INDEX}: bad '{kind}' config ({err})") from None
+    path = directory / str(entry["file"])
+    if not path.is_file() or file_sha256(path) != entry["sha256"]:
+        raise WeightsError(f"{path}: missing or does not match the checksum in {INDEX}")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in npz.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise WeightsError(f"{path}: cannot read ({err})") from None
+    return build(kind, config, arrays, str(path), dtype=dtype)
 
 
 def _few(keys: list[str], n: int = 4) -> str:

@@ -1,0 +1,59 @@
+"""Typed training configs. Each module here (``hand``, ``body``, ``synthetic``, ``smoke``) has ``get_config()``
+and a docstring with the command that runs it and the result it gave.
+
+    python -m train.main --config synthetic --workdir runs/synthetic [--set batch_size=16 --set num_steps=100]
+"""
+
+import dataclasses
+import importlib
+from typing import Literal
+
+NAMES = ("hand", "body", "synthetic", "smoke")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    kind: Literal["hand", "body"]
+    dataset: str  # a name of `train.datasets.open_dataset`
+    data_dir: str = ""
+    split: str = "train"
+    eval_dataset: str = ""  # defaults to ``dataset``
+    eval_split: str = "test"
+    depth: int = 50  # ResNet depth (18, 34, 50)
+    image_size: int = 224  # crop side; the networks pool globally, so any size runs
+    batch_size: int = 64  # global, over all devices and hosts
+    learning_rate: float = 1e-4  # Adam, as the paper
+    warmup_steps: int = 0
+    clip_norm: float = 100.0  # gradients clipped to this global norm
+    num_steps: int = 100_000
+    time_limit_s: float = 0.0  # stop (and checkpoint) after this much training time; 0 = no limit
+    eval_every: int = 1000
+    eval_examples: int = 1000
+    log_every: int = 50
+    checkpoint_every: int = 1000
+    seed: int = 0
+    workers: int = 2  # augmentation threads
+    augment: bool = True
+
+    def replace(self, **changes) -> "TrainConfig":
+        return dataclasses.replace(self, **changes)
+
+
+def get(name: str) -> TrainConfig:
+    """The config of module ``train/configs/<name>.py``."""
+    if name not in NAMES:
+        raise ValueError(f"config: unknown {name!r}; known: {', '.join(NAMES)}")
+    return importlib.import_module(f"train.configs.{name}").get_config()
+
+
+def override(config: TrainConfig, assignments: list[str]) -> TrainConfig:
+    """``["batch_size=16", "dataset=rhd"]`` applied with each field's own type."""
+    fields = {f.name: f for f in dataclasses.fields(config)}
+    changes = {}
+    for assignment in assignments:
+        key, sep, value = assignment.partition("=")
+        if not sep or key not in fields:
+            raise ValueError(f"--set: expected FIELD=VALUE with FIELD one of {', '.join(fields)}, got {assignment!r}")
+        kind = type(getattr(config, key))
+        changes[key] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+    return config.replace(**changes)
