@@ -69,15 +69,28 @@ def kinematic_chain(rel_rotmats: Float[Array, "J 3 3"], rest_joints: Float[Array
     return glob_rotmats, positions
 
 
-def _skin(weights_t, glob_rotmats, positions, rest_joints, points_cm, offset):
-    """Linear blend skinning of rest-pose points ``(3, N)`` with transforms ``[G_R | G_t - G_R J]``, plus
-    ``offset (3,)``; returns ``(N, 3)``."""
+# Up to this many joints per vertex, skinning gathers each vertex's joints' transforms; beyond, one dense
+# product with all the weights is faster (a model file with dense weights).
+MAX_GATHERED_JOINTS = 8
+
+
+def _skinning_transforms(glob_rotmats, positions, rest_joints) -> Float[Array, "12 J"]:
+    """Per-joint skinning transforms ``[G_R | G_t - G_R J]`` as columns: 9 rotation entries, then 3 translation."""
     translations = positions - _matvec3(glob_rotmats, rest_joints)
-    transforms = jnp.concatenate([glob_rotmats.reshape(-1, 9), translations], axis=-1)
-    blended = transforms.T @ weights_t  # (12, N)
+    return jnp.concatenate([glob_rotmats.reshape(-1, 9), translations], axis=-1).T
+
+
+def _gathered_blend(transforms, joints, weights) -> Float[Array, "12 N"]:
+    """Blend of each point's transforms, from its joints ``(I, N)`` and weights ``(I, N)``."""
+    return sum(weights[i] * transforms[:, joints[i]] for i in range(joints.shape[0]))
+
+
+def _skin(blended, points_cm, offset):
+    """Rest-pose points ``(3, N)`` moved by their blended transforms ``(12, N)``, plus ``offset (3,)``;
+    returns ``(N, 3)``."""
     x, y, z = points_cm
     return jnp.stack([blended[3 * c] * x + blended[3 * c + 1] * y + blended[3 * c + 2] * z + blended[9 + c] + offset[c]
-                      for c in range(3)]).T  # stacked coordinate-major, then transposed: faster than interleaving
+                      for c in range(3)], axis=-1)
 
 
 def _posed_points(template_cm, shapedirs_cm, posedirs_cm, shape, rel_rotmats):
@@ -98,29 +111,35 @@ def _posed_skeleton(model: BodyModel, params: SMPLXParams):
     return shape, rel_rotmats, rest_joints, glob_rotmats, positions
 
 
-def _with_extra_joints(model, skeleton_joints, sparse_vertices):
-    """The 127 joints: skeleton, vertex joints, landmarks (barycentric in their triangles)."""
+def _joints(model, shape, rel_rotmats, transforms, positions, transl):
+    """The 127 joints: skeleton, vertex joints, landmarks (barycentric in their triangles); of the mesh, only
+    the vertices that vertex joints and landmarks read are shaped, posed and skinned."""
+    points = _posed_points(model.sparse_template_cm, model.sparse_shapedirs_cm, model.sparse_posedirs_cm, shape,
+                           rel_rotmats)
+    sparse_vertices = _skin(transforms @ model.sparse_weights_t, points, transl)
     vertex_joints = sparse_vertices[model.vertex_joint_slots]
     landmarks = jnp.einsum("lkc,lk->lc", sparse_vertices[model.landmark_slots], model.landmark_bary)
-    return jnp.concatenate([skeleton_joints, vertex_joints, landmarks])
+    return jnp.concatenate([positions + transl, vertex_joints, landmarks])
 
 
 def forward(model: BodyModel, params: SMPLXParams) -> Output:
     """Vertices (V, 3) and the 127 joints of one body, as ``smplx.SMPLX`` computes them."""
     shape, rel_rotmats, rest_joints, glob_rotmats, positions = _posed_skeleton(model, params)
+    transforms = _skinning_transforms(glob_rotmats, positions, rest_joints)
     points = _posed_points(model.template_cm, model.shapedirs_cm, model.posedirs_cm, shape, rel_rotmats)
-    vertices = _skin(model.weights_t, glob_rotmats, positions, rest_joints, points, params.transl)
-    return Output(vertices, _with_extra_joints(model, positions + params.transl, vertices[model.sparse_ids]))
+    if model.skin_joints.shape[0] <= MAX_GATHERED_JOINTS:
+        blended = _gathered_blend(transforms, model.skin_joints, model.skin_weights)
+    else:
+        blended = transforms @ model.weights_t
+    vertices = _skin(blended, points, params.transl)
+    return Output(vertices, _joints(model, shape, rel_rotmats, transforms, positions, params.transl))
 
 
 def forward_joints(model: BodyModel, params: SMPLXParams) -> Float[Array, "127 3"]:
-    """The 127 joints of `forward` without forming the mesh: only the vertices that vertex joints and
-    landmarks read are shaped, posed and skinned."""
+    """The 127 joints of `forward` without forming the mesh."""
     shape, rel_rotmats, rest_joints, glob_rotmats, positions = _posed_skeleton(model, params)
-    points = _posed_points(model.sparse_template_cm, model.sparse_shapedirs_cm, model.sparse_posedirs_cm, shape,
-                           rel_rotmats)
-    sparse_vertices = _skin(model.sparse_weights_t, glob_rotmats, positions, rest_joints, points, params.transl)
-    return _with_extra_joints(model, positions + params.transl, sparse_vertices)
+    transforms = _skinning_transforms(glob_rotmats, positions, rest_joints)
+    return _joints(model, shape, rel_rotmats, transforms, positions, params.transl)
 
 
 def posed_skeleton(model: BodyModel, params: SMPLXParams) -> Skeleton:

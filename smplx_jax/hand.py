@@ -14,7 +14,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from smplx_jax import constants
-from smplx_jax.forward import _posed_points, _skin, kinematic_chain
+from smplx_jax.forward import _posed_points, _skin, _skinning_transforms, kinematic_chain
 from smplx_jax.model import BodyModel
 from smplx_jax.params import Side
 from smplx_jax.rotations import rotvec_to_rotmat
@@ -95,7 +95,8 @@ def hand_forward(
     rel_rotmats = jnp.concatenate([wrist_glob_rotmat[None], rotvec_to_rotmat(hand_pose)])
     glob_rotmats, positions = kinematic_chain(rel_rotmats, rest_joints, hand.parents)
     points = _posed_points(hand.template_cm, hand.shapedirs_cm, hand.posedirs_cm, betas, rel_rotmats)
-    vertices = _skin(hand.weights_t, glob_rotmats, positions, rest_joints, points, -positions[0])
+    blended = _skinning_transforms(glob_rotmats, positions, rest_joints) @ hand.weights_t
+    vertices = _skin(blended, points, -positions[0])
     joints = jnp.concatenate([positions - positions[0], vertices[hand.tip_slots]])
     return HandOutput(vertices, joints[jnp.array(_OPENPOSE_ORDER)])
 

@@ -24,14 +24,19 @@ class BodyModel:
     """One SMPL-X model. ``S = num_betas + num_expression`` shape components, ``P = 9 * 54`` pose features.
 
     Per-vertex arrays are coordinate-major (all x, then all y, then all z), so that the matrix products of
-    a batch of bodies need no transposes. The ``sparse_*`` arrays hold the few vertices that the vertex
-    joints and face landmarks read, so that `forward_joints` never forms the whole mesh.
+    a batch of bodies need no transposes. ``skin_joints``/``skin_weights`` list each vertex's ``I`` most
+    influential joints, ``I`` the most nonzero skinning weights any vertex of the file has (4 in the default
+    model), so that skinning can gather ``I`` transforms per vertex instead of blending all 55. The ``sparse_*``
+    arrays hold the few vertices that the vertex joints and face landmarks read, so that `forward_joints`
+    never forms the whole mesh.
     """
 
     template_cm: Float[Array, "3 V"]
     shapedirs_cm: Float[Array, "S 3V"]  # shape components (S,) @ shapedirs_cm -> (3V,)
     posedirs_cm: Float[Array, "P 3V"]  # pose feature (P,) @ posedirs_cm -> (3V,)
     weights_t: Float[Array, "J V"]
+    skin_joints: Int[Array, "I V"]  # each vertex's joints by decreasing weight
+    skin_weights: Float[Array, "I V"]  # their weights; all others are zero
     joint_template: Float[Array, "J 3"]  # J_regressor @ v_template
     joint_shapedirs: Float[Array, "J 3 S"]  # J_regressor @ shapedirs
     faces: Int[Array, "F 3"]
@@ -98,13 +103,19 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
     sparse_ids, slots = np.unique(needed, return_inverse=True)
     num_vertex_joints = len(constants.VERTEX_JOINT_IDS)
 
+    weights = arrays["weights"]
+    influences = max(1, int(np.count_nonzero(weights, axis=1).max()))
+    skin_joints = np.argsort(-weights, axis=1, kind="stable")[:, :influences]
+
     hand_components = np.stack([arrays["hands_componentsl"], arrays["hands_componentsr"]])
     f = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
     return BodyModel(
         template_cm=f(v_template.T),
         shapedirs_cm=f(_coordinate_major(shapedirs)),
         posedirs_cm=f(_coordinate_major(posedirs)),
-        weights_t=f(arrays["weights"].T),
+        weights_t=f(weights.T),
+        skin_joints=jnp.asarray(skin_joints.T, dtype=jnp.int32),
+        skin_weights=f(np.take_along_axis(weights, skin_joints, axis=1).T),
         joint_template=f(j_regressor @ v_template),
         joint_shapedirs=f(np.einsum("jv,vcs->jcs", j_regressor, shapedirs)),
         faces=jnp.asarray(faces, dtype=jnp.int32),
@@ -114,7 +125,7 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
         sparse_template_cm=f(v_template[sparse_ids].T),
         sparse_shapedirs_cm=f(_coordinate_major(shapedirs[sparse_ids])),
         sparse_posedirs_cm=f(_coordinate_major(posedirs[sparse_ids])),
-        sparse_weights_t=f(arrays["weights"][sparse_ids].T),
+        sparse_weights_t=f(weights[sparse_ids].T),
         vertex_joint_slots=jnp.asarray(slots[:num_vertex_joints], dtype=jnp.int32),
         landmark_slots=jnp.asarray(slots[num_vertex_joints:].reshape(-1, 3), dtype=jnp.int32),
         landmark_bary=f(arrays["lmk_bary_coords"]),

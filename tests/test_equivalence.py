@@ -71,3 +71,22 @@ def test_equivalence_detects_a_wrong_model(random_model_dir, default_model_dir):
         ref = _torch_model(random_model_dir, use_pca=False, flat_hand_mean=True)(**torch_inputs(params))
     out = FORWARD(load(default_model_dir), params)
     assert np.abs(np.asarray(out.joints) - ref.joints.numpy()).max() > 100 * TOL
+
+
+def test_dense_skinning_weights_match_smplx(tmp_path):
+    """A file whose vertices all weigh every joint takes the dense skinning product (not the per-vertex gather)."""
+    from random_model import random_model_arrays
+
+    from smplx_jax.forward import MAX_GATHERED_JOINTS
+    arrays = random_model_arrays(seed=3)
+    arrays["weights"] = np.random.default_rng(3).dirichlet(np.ones(arrays["weights"].shape[1]), len(arrays["weights"]))
+    (tmp_path / "smplx").mkdir()
+    np.savez(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz", **arrays)
+    model = smplx_jax.load_model(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz")
+    assert model.skin_joints.shape[0] > MAX_GATHERED_JOINTS
+    params = random_params(seed=4, batch=BATCH)
+    with torch.no_grad():
+        ref = _torch_model(tmp_path, use_pca=False, flat_hand_mean=True)(**torch_inputs(params), return_verts=True)
+    out = FORWARD(model, params)
+    assert np.abs(np.asarray(out.vertices) - ref.vertices.numpy()).max() <= TOL
+    assert np.abs(np.asarray(out.joints) - ref.joints.numpy()).max() <= TOL
