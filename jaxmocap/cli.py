@@ -36,13 +36,14 @@ def _cmd_run(args):
     _print_report(run(args.input, args.out, model_path=args.model, weights=args.weights, integration=args.integration,
                       keypoints_dir=args.keypoints, start=args.start, end=args.end, stride=args.stride,
                       chunk_size=args.chunk, iterations=args.iterations, smooth=not args.no_smooth,
-                      overlay=not args.no_overlay, exports=exports, progress=not args.quiet))
+                      overlay=not args.no_overlay, exports=exports, progress=not args.quiet,
+                      hand_boxes=args.hand_boxes, frankmocap_pkl=args.frankmocap_pkl))
 
 
 def _cmd_demo(args):
     from jaxmocap.demo import demo
 
-    _print_report(demo(args.out))
+    _print_report(demo(args.out, frankmocap_pkl=args.frankmocap_pkl))
 
 
 def _cmd_detect(args):
@@ -88,6 +89,8 @@ def _parser() -> argparse.ArgumentParser:
 
     p = commands.add_parser("demo", help="the main job on the bundled sample clip: motion, overlay video, exports")
     p.add_argument("--out", type=Path, default=Path("jaxmocap_demo"), help="output folder (default: %(default)s)")
+    p.add_argument("--frankmocap-pkl", action="store_true",
+                   help="also FrankMocap's per-frame prediction pickles in DIR/mocap/")
     p.set_defaults(run=_cmd_demo)
 
     p = commands.add_parser("run", help="video, image folder, image or webcam -> DIR/motion.npz, overlay, exports")
@@ -95,8 +98,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("jaxmocap_out"), help="output folder (default: %(default)s)")
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
     p.add_argument("--weights", type=Path, default=None, help="FrankMocap regressors from convert-frankmocap")
-    p.add_argument("--integration", choices=("optimize", "copy-paste"), default="optimize",
-                   help="how body and hands are merged (copy-paste needs --weights; default: %(default)s)")
+    p.add_argument("--integration", choices=("optimize", "copy-paste", "eft"), default="optimize",
+                   help="how body and hands are merged (copy-paste and eft need --weights; default: %(default)s)")
+    p.add_argument("--hand-boxes", choices=("keypoints", "body"), default="keypoints",
+                   help="hand crops from the detector's hand keypoints, or (with --weights; no hand detector) from "
+                        "the body regressor's projected hands, FrankMocap's fast mode (default: %(default)s)")
+    p.add_argument("--frankmocap-pkl", action="store_true",
+                   help="also FrankMocap's per-frame prediction pickles in DIR/mocap/ (its --save_pred_pkl)")
     p.add_argument("--keypoints", type=Path, default=None,
                    help="OpenPose JSON folder to fit to instead of the detector's 2D keypoints")
     p.add_argument("--start", type=int, default=0, help="first frame (default: 0)")

@@ -49,8 +49,8 @@ def render_body_model(model_path: Path, out_dir: Path) -> list[Path]:
     return written
 
 
-def demo(out_dir: Path):
-    """The main job on the bundled Pose2Sim clip, with both exports."""
+def demo(out_dir: Path, frankmocap_pkl: bool = False):
+    """The main job on the bundled Pose2Sim clip, with both exports (and FrankMocap's pickles if asked)."""
     from jaxmocap.pipeline import run
 
-    return run(DEMO_CLIP, out_dir, exports=("bvh", "gltf"))
+    return run(DEMO_CLIP, out_dir, exports=("bvh", "gltf"), frankmocap_pkl=frankmocap_pkl)

@@ -21,8 +21,8 @@ class MediaError(InputError):
 @dataclass(frozen=True)
 class Media:
     """An opened input. ``kind``: ``video``, ``images``, ``image`` or ``webcam``; ``size`` (width, height) of the
-    first frame; ``frame_count`` after ``start``/``end``/``stride`` (None for a webcam); ``stems``: one name per
-    image for ``images``/``image``."""
+    first frame; ``frame_count`` after ``start``/``end``/``stride`` (None for a webcam); ``stems`` and ``paths``: one
+    name and file per image for ``images``/``image``."""
 
     kind: str
     stem: str
@@ -30,6 +30,7 @@ class Media:
     size: tuple[int, int]
     frame_count: int | None
     stems: tuple[str, ...] = ()
+    paths: tuple[Path, ...] = ()
 
 
 def read_image(path) -> np.ndarray:
@@ -113,7 +114,8 @@ def open_media(source, start: int = 0, end: int | None = None, stride: int = 1) 
             raise MediaError(f"folder {path} holds no images ({', '.join(sorted(IMAGE_SUFFIXES))}) in that range")
         first = read_image(files[0])
         kind = "images" if path.is_dir() else "image"
-        media = Media(kind, path.stem, 30.0, (first.shape[1], first.shape[0]), len(files), tuple(f.stem for f in files))
+        media = Media(kind, path.stem, 30.0, (first.shape[1], first.shape[0]), len(files),
+                      tuple(f.stem for f in files), tuple(files))
         return media, ((start + i * stride, read_image(f)) for i, f in enumerate(files))
 
     cap = _capture(path)

@@ -1,6 +1,7 @@
 """End to end: ``jaxmocap run`` on frames of the sample clip — outputs, conventions, resume, bad input."""
 
 import json
+import pickle
 import struct
 from pathlib import Path
 
@@ -26,7 +27,7 @@ FRAMES, CHUNK = 8, 4  # every run here has the same shapes, so the jitted stages
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
     report = pipeline_run.run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
-                              progress=False)
+                              progress=False, frankmocap_pkl=True)
     return out, report
 
 
@@ -47,19 +48,96 @@ def test_smplx_pytorch_reproduces_the_stored_projections(result):
     """The motion loaded into the PyTorch smplx package with the stored camera gives the stored errors."""
     out, _ = result
     motion = read_motion(out / "motion.npz")
-    body = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
-                        flat_hand_mean=True, num_betas=motion["betas"].shape[1], batch_size=FRAMES)
-    t = lambda k: torch.from_numpy(np.ascontiguousarray(motion[k], np.float32)).reshape(FRAMES, -1)  # noqa: E731
-    with torch.no_grad():
-        joints = body(global_orient=t("global_orient"), body_pose=t("body_pose"), left_hand_pose=t("left_hand_pose"),
-                      right_hand_pose=t("right_hand_pose"), jaw_pose=t("jaw_pose"), betas=t("betas"),
-                      transl=t("transl")).joints.numpy()
+    joints = smplx_joints(motion)
     pixels = motion["camera_scale"][:, None, None] * joints[:, constants.OPENPOSE67_FROM_SMPLX, :2]
     pixels += motion["camera_trans"][:, None]
     keypoints = motion["keypoints_2d"]
     seen = keypoints[..., 2] > 0
     dist = np.where(seen, np.linalg.norm(pixels - keypoints[..., :2], axis=-1), 0).sum(1) / seen.sum(1)
     np.testing.assert_allclose(dist, motion["reprojection_error_px"], atol=0.01)
+
+
+def frankmocap_to_image(points, scale, trans, ratio, top_left, trans_first=False):
+    """FrankMocap's ``convert_smpl_to_bbox`` then ``convert_bbox_to_oriIm`` (mocap_utils/coordconv.py), transcribed."""
+    data = np.array(points, np.float64)
+    if trans_first:  # hand model
+        data[:, 0:2] += trans
+        data *= scale
+    else:
+        data *= scale
+        data[:, 0:2] += trans
+    data *= 224 * 0.5
+    data /= ratio
+    data[:, :2] += np.asarray(top_left) + 224 * 0.5 / ratio
+    return data
+
+
+PKL_KEYS = ["demo_type", "smpl_type", "image_path", "body_bbox_list", "hand_bbox_list", "save_mesh", "pred_output_list"]
+PERSON_SHAPES = {"pred_camera": (3,), "bbox_top_left": (2,), "pred_body_pose": (1, 72), "pred_betas": (1, 10),
+                 "pred_body_joints_img": (49, 3), "pred_lhand_joints_img": (21, 3), "pred_rhand_joints_img": (21, 3),
+                 "pred_left_hand_pose": (1, 45), "pred_right_hand_pose": (1, 45), "left_hand_local_orient_body": (1, 3),
+                 "right_hand_global_orient_body": (1, 3)}
+
+
+def test_frankmocap_pickles_reproduce_the_projection(result):
+    """--frankmocap-pkl: FrankMocap's layout, and its own layer (mean-relative hands, no translation) and camera
+    formulas give our stored projection."""
+    out, _ = result
+    motion = read_motion(out / "motion.npz")
+    files = sorted((out / "mocap").iterdir())
+    assert [f.name for f in files] == [f"{20 + t:05d}_prediction_result.pkl" for t in range(FRAMES)]
+    data = [pickle.loads(f.read_bytes()) for f in files]
+    people = [d["pred_output_list"][0] for d in data]
+    for t, (d, person) in enumerate(zip(data, people)):
+        assert list(d) == PKL_KEYS and (d["demo_type"], d["smpl_type"], d["save_mesh"]) == ("frank", "smplx", False)
+        assert d["image_path"] == str((out / "frames" / f"{20 + t:05d}.jpg").absolute())
+        assert d["body_bbox_list"][0].shape == (4,) and set(d["hand_bbox_list"][0]) == {"left_hand", "right_hand"}
+        assert {k: person[k].shape for k in PERSON_SHAPES} == PERSON_SHAPES and "pred_vertices_smpl" not in person
+        assert all(person[k].dtype == np.float32 for k in PERSON_SHAPES if k != "bbox_top_left")
+        _, ratio, top_left = ref.body_crop(np.zeros((1080, 1920, 3), np.uint8), d["body_bbox_list"][0])
+        assert person["bbox_scale_ratio"] == pytest.approx(ratio) and np.array_equal(person["bbox_top_left"], top_left)
+    t = lambda k: torch.from_numpy(np.stack([p[k][0] for p in people]))  # noqa: E731
+    layer = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
+                         flat_hand_mean=False, num_betas=10, batch_size=FRAMES)  # FrankMocap's SMPLX layer
+    with torch.no_grad():
+        joints = layer(global_orient=t("pred_body_pose")[:, :3], body_pose=t("pred_body_pose")[:, 3:66],
+                       betas=t("pred_betas"), left_hand_pose=t("pred_left_hand_pose"),
+                       right_hand_pose=t("pred_right_hand_pose")).joints.numpy()
+    ours = motion["camera_scale"][:, None, None] * smplx_joints(motion)[..., :2] + motion["camera_trans"][:, None]
+    for n, person in enumerate(people):
+        theirs = frankmocap_to_image(joints[n], person["pred_camera"][0], person["pred_camera"][1:],
+                                     person["bbox_scale_ratio"], person["bbox_top_left"])
+        np.testing.assert_allclose(theirs[:, :2], ours[n], atol=0.5)
+        stored = np.concatenate([person[k] for k in ("pred_body_joints_img", "pred_lhand_joints_img",
+                                                     "pred_rhand_joints_img")])
+        openpose = np.concatenate([np.arange(25), 49 + np.arange(42)])
+        np.testing.assert_allclose(stored[openpose, :2], ours[n, constants.OPENPOSE67_FROM_SMPLX], atol=0.5)
+        assert np.isnan(stored[[27, 28, *range(37, 44)]]).all() and np.isfinite(np.delete(stored, [27, 28, *range(
+            37, 44)], axis=0)).all()
+        for side, index1, ids in (("left", 25, constants.LEFT_HAND21_FROM_SMPLX),
+                                  ("right", 40, constants.RIGHT_HAND21_FROM_SMPLX)):
+            box = data[n]["hand_bbox_list"][0][f"{side}_hand"]
+            if box is None:
+                assert person[f"{side}_hand_camera"] is None and person[f"{side}_hand_local_orient_hand"] is None
+                continue
+            _, ratio, top_left = ref.hand_crop(np.zeros((1080, 1920, 3), np.uint8), box)
+            assert person[f"{side}_hand_bbox_scale_ratio"] == pytest.approx(ratio)
+            assert tuple(person[f"{side}_hand_bbox_top_left"]) == tuple(top_left)
+            hand = frankmocap_to_image(joints[n, list(ids)] - joints[n, index1], person[f"{side}_hand_camera"][0],
+                                       person[f"{side}_hand_camera"][1:], ratio, top_left, trans_first=True)
+            np.testing.assert_allclose(hand[:, :2], ours[n, list(ids)], atol=0.5)
+
+
+def smplx_joints(motion):
+    """The motion's 127 joints per frame by the PyTorch smplx package (DESIGN 2.3)."""
+    frames = len(motion["valid"])
+    body = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
+                        flat_hand_mean=True, num_betas=motion["betas"].shape[1], batch_size=frames)
+    t = lambda k: torch.from_numpy(np.ascontiguousarray(motion[k], np.float32)).reshape(frames, -1)  # noqa: E731
+    with torch.no_grad():
+        return body(global_orient=t("global_orient"), body_pose=t("body_pose"), left_hand_pose=t("left_hand_pose"),
+                    right_hand_pose=t("right_hand_pose"), jaw_pose=t("jaw_pose"), betas=t("betas"),
+                    transl=t("transl")).joints.numpy()
 
 
 def test_overlay_and_exports(result):
@@ -129,18 +207,34 @@ def test_bad_input_is_one_line(tmp_path, capsys, monkeypatch, args, message):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("integration", ["copy-paste", "optimize"])
-def test_frankmocap_path_with_converted_weights(tmp_path, integration):
-    """Random FrankMocap-format checkpoints -> convert-frankmocap -> run --weights: a motion for every frame."""
+@pytest.mark.parametrize("integration, hand_boxes", [("copy-paste", "keypoints"), ("optimize", "keypoints"),
+                                                     ("copy-paste", "body")])
+def test_frankmocap_path_with_converted_weights(tmp_path, integration, hand_boxes):
+    """Random FrankMocap-format checkpoints -> convert-frankmocap -> run --weights: a motion for every frame; with
+    ``--hand-boxes body`` the hand detector is skipped and the body's hands give boxes inside the image."""
     ref.write_checkpoints(tmp_path)
     assert main(["convert-frankmocap", "--hand", str(tmp_path / "pose_shape_best.pth"), "--hand-mean",
                  str(tmp_path / "mean_mano_params.pkl"), "--body", str(tmp_path / "body.pt"), "--out",
                  str(tmp_path / "weights")]) == 0
     report = pipeline_run.run(CLIP, tmp_path / "out", weights=tmp_path / "weights", integration=integration,
-                              start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
+                              start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False,
+                              hand_boxes=hand_boxes, frankmocap_pkl=True)
     motion = read_motion(report.motion)
     assert motion["valid"].all() and np.all(np.isfinite(motion["body_pose"]))
     assert np.all(motion["camera_scale"] > 0)
+    if hand_boxes == "body":
+        assert not motion["keypoints_2d"][:, 25:, 2].any()  # no hand detection
+        files = sorted((tmp_path / "out" / "mocap").iterdir())
+        boxes = [pickle.loads(f.read_bytes())["hand_bbox_list"][0] for f in files]
+        xywh = np.array([[b[side] for side in ("left_hand", "right_hand")] for b in boxes], np.float64)
+        assert xywh.shape == (FRAMES, 2, 4) and np.isfinite(xywh).all()
+        assert np.all(xywh[..., :2] >= 0) and np.all(xywh[..., :2] + xywh[..., 2:] <= (1080, 1920))
+
+
+def test_body_hand_boxes_need_weights(tmp_path, capsys):
+    code = main(["run", str(CLIP), "--hand-boxes", "body", "--out", str(tmp_path / "o"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--weights" in err
 
 
 def test_weights_of_another_architecture_are_refused(tmp_path, capsys):

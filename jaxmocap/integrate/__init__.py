@@ -7,19 +7,20 @@
 
 Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `solver`
 (Levenberg-Marquardt with an analytic matrix-free Jacobian), `fitting` (2D keypoints -> pose, shape, camera),
-`smooth` (temporal), `camera`, `motion` (fits -> motion.npz arrays), `folder` (the ``jaxmocap fit`` command), `synthetic`
-(problems with known answers for tests and benchmarks).
+`eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`, `motion` (fits -> motion.npz
+arrays), `folder` (the ``jaxmocap fit`` command), `synthetic` (problems with known answers for tests and benchmarks).
 """
 
 from jaxmocap.integrate.camera import project, weak_perspective_from_points
 from jaxmocap.integrate.copy_and_paste import copy_paste, wrist_local_rotvecs
+from jaxmocap.integrate.eft import EFTConfig, EFTResult, fine_tune
 from jaxmocap.integrate.fitting import FitConfig, FitResult, default_pose, fit
 from jaxmocap.integrate.inverse_kinematics import body_from_blazepose, hand_into_body, ik
 from jaxmocap.integrate.motion import fitted_motion, reprojection_errors
 from jaxmocap.integrate.smooth import KERNEL, smooth_camera, smooth_linear, smooth_params, smooth_rotvecs
 
 __all__ = [
-    "FitConfig", "FitResult", "KERNEL", "body_from_blazepose", "copy_paste", "default_pose", "fit", "fitted_motion",
-    "hand_into_body", "ik", "project", "reprojection_errors", "smooth_camera", "smooth_linear", "smooth_params",
-    "smooth_rotvecs", "weak_perspective_from_points", "wrist_local_rotvecs",
+    "EFTConfig", "EFTResult", "FitConfig", "FitResult", "KERNEL", "body_from_blazepose", "copy_paste", "default_pose",
+    "fine_tune", "fit", "fitted_motion", "hand_into_body", "ik", "project", "reprojection_errors", "smooth_camera",
+    "smooth_linear", "smooth_params", "smooth_rotvecs", "weak_perspective_from_points", "wrist_local_rotvecs",
 ]

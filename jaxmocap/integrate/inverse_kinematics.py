@@ -62,8 +62,9 @@ def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     return jnp.where(ok, out.theta, theta), jnp.where(ok, out.betas, betas), jnp.where(ok, out.cam, cam), ok
 
 
-@functools.partial(jax.jit, static_argnames=("free_joints", "fit_betas", "config"))
+@functools.partial(jax.jit, static_argnames=("config",))
 def _ik_batch(km, targets, conf, theta, betas, free_joints, fit_betas, config):
+    # The masks are traced: body and hand IK (both 21 keypoints) share one compiled solver.
     one = functools.partial(_ik_one, free_joints=free_joints, fit_betas=fit_betas, config=config)
     return jax.vmap(one, in_axes=(None, 0, 0, 0, 0))(km, targets, conf, theta, betas)
 
@@ -76,7 +77,7 @@ def ik(model: BodyModel, index, targets, conf, theta, betas, free_joints, *, fit
     km = _keypoint_model(model, tuple(int(i) for i in index))
     return _ik_batch(km, jnp.asarray(targets, jnp.float32), jnp.asarray(conf, jnp.float32),
                      jnp.asarray(theta, jnp.float32), jnp.asarray(betas, jnp.float32),
-                     tuple(bool(f) for f in free_joints), fit_betas, config or IKConfig())
+                     jnp.asarray(free_joints, jnp.float32), jnp.float32(fit_betas), config or IKConfig())
 
 
 def body_from_blazepose(model: BodyModel, world: np.ndarray, theta=None, betas=None, config=None):

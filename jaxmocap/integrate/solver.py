@@ -251,14 +251,16 @@ class Result(NamedTuple):
     accepted: jax.Array  # number of accepted steps
 
 
-def solve(km: KeypointModel, problem: Problem, theta, betas, cam, free_joints: tuple[bool, ...], fit_betas: bool,
+def solve(km: KeypointModel, problem: Problem, theta, betas, cam, free_joints: Float[Array, "55"], fit_betas,
           fit_scale: bool, config: SolverConfig) -> Result:
-    """Robust, regularised least squares of one body from ``(theta, betas, cam)``; never increases the cost."""
+    """Robust, regularised least squares of one body from ``(theta, betas, cam)``; never increases the cost.
+    ``free_joints`` (55,) and ``fit_betas`` are 0/1 masks (bools or traced values: one compiled solver serves
+    different free sets)."""
     dtype = theta.dtype
     d = problem.target.shape[-1]
     nk = problem.target.shape[0]
-    free = jnp.asarray(np.asarray(free_joints, dtype=np.float32), dtype)[None, :]  # (1, 55)
-    mask = _Vec(jnp.broadcast_to(free, (3, 55)), jnp.full(betas.shape, float(fit_betas), dtype),
+    free = jnp.asarray(free_joints, dtype)[None, :]  # (1, 55)
+    mask = _Vec(jnp.broadcast_to(free, (3, 55)), jnp.full(betas.shape, fit_betas, dtype),
                 jnp.concatenate([jnp.full((1,), float(fit_scale), dtype), jnp.ones((d,), dtype)]))
     target = problem.target.T  # (D, K)
     theta0 = problem.theta0.T

@@ -23,6 +23,7 @@ import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.errors import InputError
+from jaxmocap.export.frankmocap import write_frankmocap_pkls
 from jaxmocap.integrate import body_from_blazepose, fit, fitted_motion, hand_into_body
 from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.folder import read_keypoint_folder
@@ -34,7 +35,7 @@ from jaxmocap.pipeline.observe import observe
 from jaxmocap.pipeline.outputs import EXPORT_FILES, write_exports, write_overlay
 from jaxmocap.pipeline.regress import Regression, solve_regressors
 
-SETTINGS_VERSION = 1
+SETTINGS_VERSION = 2
 
 
 @dataclass
@@ -79,18 +80,26 @@ def _keypoints_by_frame(folder) -> dict[int, np.ndarray]:
 def run(source, out_dir, *, model_path=None, weights=None, integration: str = "optimize", keypoints_dir=None,
         start: int = 0,
         end: int | None = None, stride: int = 1, chunk_size: int = 128, iterations: int = 20, smooth: bool = True,
-        overlay: bool = True, exports: tuple[str, ...] = (), progress: bool = True) -> RunReport:
+        overlay: bool = True, exports: tuple[str, ...] = (), progress: bool = True, hand_boxes: str = "keypoints",
+        frankmocap_pkl: bool = False) -> RunReport:
     """Run over ``source`` and write ``out_dir/motion.npz`` (DESIGN 2.3), the detections as OpenPose JSON in
     ``out_dir/keypoints/``, ``out_dir/overlay.mp4`` and the requested exports. Without ``weights`` the embedded
-    default path; with ``weights`` (from ``convert-frankmocap``) FrankMocap's regressors, copy-and-paste and, for
+    default path; with ``weights`` (from ``convert-frankmocap``) FrankMocap's regressors (for ``integration="eft"``
+    the body regressor fine-tuned per frame on the 2D keypoints), copy-and-paste and, for
     ``integration="optimize"``, the fit. ``keypoints_dir``: OpenPose JSON (e.g. from OpenPose itself) to fit to
-    instead of the detector's 2D keypoints."""
+    instead of the detector's 2D keypoints. ``hand_boxes="body"`` (with ``weights``): hand boxes from the body
+    regressor's projected hands and the detector's pose alone (FrankMocap's fast mode). ``frankmocap_pkl``: also
+    FrankMocap's per-frame prediction pickles in ``out_dir/mocap/``."""
     from tqdm import tqdm
 
-    if integration not in ("optimize", "copy-paste"):
-        raise InputError(f"unknown integration {integration!r} (optimize or copy-paste)")
-    if integration == "copy-paste" and weights is None:
-        raise InputError("--integration copy-paste needs --weights (the regressors); the default path optimizes")
+    if integration not in ("optimize", "copy-paste", "eft"):
+        raise InputError(f"unknown integration {integration!r} (optimize, copy-paste or eft)")
+    if integration in ("copy-paste", "eft") and weights is None:
+        raise InputError(f"--integration {integration} needs --weights (the regressors); the default path optimizes")
+    if hand_boxes not in ("keypoints", "body"):
+        raise InputError(f"unknown hand boxes {hand_boxes!r} (keypoints or body)")
+    if hand_boxes == "body" and weights is None:
+        raise InputError("--hand-boxes body needs --weights (the body regressor gives the hand boxes)")
     unknown = sorted(set(exports) - set(EXPORT_FILES))
     if unknown:
         raise InputError(f"unknown export format(s) {', '.join(unknown)} (known: {', '.join(EXPORT_FILES)})")
@@ -99,7 +108,7 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
     model_path = Path(model_path) if model_path else smplx_jax.default_model_path()
     model = smplx_jax.load_model(model_path)
     model_sha = file_sha256(model_path)
-    regression = Regression.load(weights, model) if weights is not None else None
+    regression = Regression.load(weights, model, hand_boxes == "body") if weights is not None else None
     given = _keypoints_by_frame(keypoints_dir) if keypoints_dir is not None else None
     media, frames = open_media(source, start, end, stride)
     still = media.kind in ("image", "images")
@@ -107,9 +116,9 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
     store = ChunkStore(out_dir, dict(version=SETTINGS_VERSION, source=source_id, start=start, end=end, stride=stride,
                                      chunk=chunk_size, iterations=iterations, model=model_sha,
                                      weights=weights and file_sha256(Path(weights) / "regressors.json"),
-                                     integration=integration,
+                                     integration=integration, hand_boxes=hand_boxes,
                                      keypoints=keypoints_dir and str(Path(keypoints_dir).resolve())))
-    detector = Detector(static_image_mode=still)
+    detector = Detector(static_image_mode=still, hands=hand_boxes == "keypoints")
     report = RunReport(out_dir / "motion.npz", 0, 0)
     seconds = report.seconds
     chunks, frame_ids = [], []
@@ -138,7 +147,8 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
                 solved = solve_regressors(model, regression, [frame for _, frame in batch], obs, integration,
                                           iterations)
                 seconds["regress+integrate"] += time.perf_counter() - t0
-            stored = solved | {"keypoints_2d": obs.keypoints, "frame_index": np.asarray(ids)}
+            stored = {"body_box": obs.body_box, "hand_boxes": obs.hand_boxes} | solved | {
+                "keypoints_2d": obs.keypoints, "frame_index": np.asarray(ids)}
             store.save(index, stored)
             for n, frame_id in enumerate(ids):
                 name = json_name(media.stems[len(frame_ids) + n], None) if still else json_name(media.stem, frame_id)
@@ -159,6 +169,10 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
     seconds["smooth+write"] += time.perf_counter() - t0
     report.frames, report.valid = len(frame_ids), int(motion["valid"].sum())
     report.written.append(report.motion)
+    if frankmocap_pkl:
+        boxes = [np.concatenate([c[k] for c in chunks]) for k in ("body_box", "hand_boxes")]
+        report.written.extend(write_frankmocap_pkls(out_dir, model, motion, *boxes,
+                                                    _frame_images(media, out_dir, frame_ids)))
     if overlay:
         t0 = time.perf_counter()
         report.written.append(write_overlay(out_dir / "overlay.mp4", model, motion, source, start, end, stride,
@@ -170,6 +184,15 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
         seconds["exports"] += time.perf_counter() - t0
     store.clear()
     return report
+
+
+def _frame_images(media, out_dir: Path, frame_ids) -> list[Path]:
+    """Each frame's image as FrankMocap names it: the image file, else ``frames/<frame:05d>.jpg`` (a webcam's
+    ``frames/scene_<frame:05d>.jpg``), which FrankMocap writes only with ``--save_frame``."""
+    if media.paths:
+        return list(media.paths)
+    prefix = "scene_" if media.kind == "webcam" else ""
+    return [out_dir / "frames" / f"{prefix}{i:05d}.jpg" for i in frame_ids]
 
 
 def _assemble(model, chunks, smooth):

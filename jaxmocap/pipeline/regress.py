@@ -8,6 +8,8 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.integrate import copy_paste, fit
+from jaxmocap.pipeline.exemplar import fine_tuned_bodies
+from jaxmocap.pipeline.hand_boxes import hand_boxes_from_body
 from jaxmocap.pipeline.observe import Observations
 from jaxmocap.regressors import Predictor, crops, decode_bodies, decode_hands, load, predict_bodies, predict_hands
 from smplx_jax import constants
@@ -19,14 +21,16 @@ _PASTE = jax.jit(jax.vmap(copy_paste, in_axes=(None, 0, 0, 0, 0, 0)))
 
 @dataclass(frozen=True)
 class Regression:
-    """Loaded networks and what decoding them needs (built once per run)."""
+    """Loaded networks and what decoding them needs (built once per run). ``hands_from_body``: hand boxes from
+    the body regressor's projected hands (`hand_boxes_from_body`) instead of the detector's."""
 
     predictor: Predictor
     right_hand: smplx_jax.HandModel
+    hands_from_body: bool = False
 
     @classmethod
-    def load(cls, weights_dir, model: smplx_jax.BodyModel) -> "Regression":
-        return cls(Predictor(load(weights_dir)), smplx_jax.hand_model(model, "right"))
+    def load(cls, weights_dir, model: smplx_jax.BodyModel, hands_from_body: bool = False) -> "Regression":
+        return cls(Predictor(load(weights_dir)), smplx_jax.hand_model(model, "right"), hands_from_body)
 
 
 def _xywh(boxes):
@@ -40,13 +44,19 @@ def _pixel_camera(camera, window):
     return pixels[:, 1, 0] - pixels[:, 0, 0], pixels[:, 0]
 
 
-def _regress(model, reg: Regression, frames, obs: Observations, rows):
-    """Copy-and-paste bodies of the frames ``rows`` and their pixel cameras; ``ok`` where the body was cropped."""
+def _regress(model, reg: Regression, frames, obs: Observations, rows, eft: bool):
+    """Copy-and-paste bodies of the frames ``rows``, their pixel cameras, ``ok`` where the body was cropped, and
+    the hand boxes used (N, 2, 4)."""
     images = np.stack([frames[i] for i in rows])
     local = np.arange(len(rows))
-    body_raw, body_window, body_ok = predict_bodies(reg.predictor, images, local, _xywh(obs.body_box[rows]))
+    body_boxes = _xywh(obs.body_box[rows])
+    body_raw, body_window, body_ok = (
+        fine_tuned_bodies(reg.predictor, model, images, local, body_boxes, obs.keypoints[rows]) if eft
+        else predict_bodies(reg.predictor, images, local, body_boxes))
     body = decode_bodies(model, body_raw, body_window)
-    boxes = _xywh(obs.hand_boxes[rows].reshape(-1, 4))
+    hand_boxes = (hand_boxes_from_body(np.asarray(body.joints_2d), images.shape[2:0:-1]) if reg.hands_from_body
+                  else obs.hand_boxes[rows])
+    boxes = _xywh(hand_boxes.reshape(-1, 4))
     is_left = np.tile([True, False], len(rows))
     hand_raw, hand_window, hand_ok = predict_hands(reg.predictor, images, np.repeat(local, 2), boxes, is_left)
     hands = decode_hands(model, reg.right_hand, hand_raw, is_left, hand_window)
@@ -59,16 +69,18 @@ def _regress(model, reg: Regression, frames, obs: Observations, rows):
     safe = jax.tree.map(lambda a: jnp.where(jnp.isfinite(a), a, 0.0), body.params)
     pasted = _PASTE(model, safe, fingers[:, 0], wrists[:, 0], fingers[:, 1], wrists[:, 1])
     scale, trans = _pixel_camera(jnp.where(jnp.isfinite(body_raw.camera), body_raw.camera, 1.0), body_window)
-    return pasted, np.asarray(scale), np.asarray(trans), body_ok
+    return pasted, np.asarray(scale), np.asarray(trans), body_ok, hand_boxes
 
 
 def solve_regressors(model, reg: Regression, frames, obs: Observations, integration: str, iterations: int) -> dict:
-    """Per-frame parameters and camera for one chunk: regressors + copy-and-paste (+ the fit with
-    ``integration == "optimize"``)."""
-    parts = [_regress(model, reg, frames, obs, np.arange(s, min(s + FRAMES_PER_BATCH, len(frames))))
+    """Per-frame parameters and camera for one chunk: regressors (the body fine-tuned per frame with
+    ``integration == "eft"``) + copy-and-paste (+ the fit with ``integration == "optimize"``), and the hand boxes
+    the hand regressor used."""
+    parts = [_regress(model, reg, frames, obs, np.arange(s, min(s + FRAMES_PER_BATCH, len(frames))),
+                      integration == "eft")
              for s in range(0, len(frames), FRAMES_PER_BATCH)]
     params = jax.tree.map(lambda *a: jnp.concatenate(a), *[p[0] for p in parts])
-    scale, trans, ok = (np.concatenate([p[k] for p in parts]) for k in (1, 2, 3))
+    scale, trans, ok, hand_boxes = (np.concatenate([p[k] for p in parts]) for k in (1, 2, 3, 4))
     ok = ok & obs.found & (scale > 0)
     if integration == "optimize":
         result = fit(model, obs.keypoints, init=params, camera_scale=np.where(ok, scale, 1.0),
@@ -76,4 +88,4 @@ def solve_regressors(model, reg: Regression, frames, obs: Observations, integrat
         params, scale, trans = result.params, np.asarray(result.camera_scale), np.asarray(result.camera_trans)
         ok = ok & np.asarray(result.valid)
     arrays = {k: np.asarray(v) for k, v in vars(params).items()}
-    return arrays | {"camera_scale": scale, "camera_trans": trans, "valid": ok}
+    return arrays | {"camera_scale": scale, "camera_trans": trans, "valid": ok, "hand_boxes": hand_boxes}

@@ -49,7 +49,11 @@ class BodyRegressor(nnx.Module):
         self.init_cam = Buffer(jnp.zeros(3))
 
     def __call__(self, images: Float[Array, "N H W 3"]) -> BodyOutput:
-        feat = self.encoder(images).astype(jnp.float32)  # heads in float32
+        return self.regress(self.encoder(images))
+
+    def regress(self, features: Float[Array, "N F"]) -> BodyOutput:
+        """The heads on the encoder's pooled features."""
+        feat = features.astype(jnp.float32)  # heads in float32
         n = feat.shape[0]
         start = (self.init_pose, self.init_shape, self.init_cam)
         pose, shape, cam = (jnp.broadcast_to(b[...], (n, b.shape[0])) for b in start)

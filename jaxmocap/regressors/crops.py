@@ -139,6 +139,12 @@ def hand_to_image(points: Float[Array, "N P 3"], camera: Float[Array, "N 3"], wi
     return _crop_to_image(crop_xy, window)
 
 
+def image_to_crop(points: Float[Array, "N P 2"], window: Window) -> Float[Array, "N P 2"]:
+    """Image pixels -> pixels of the 224x224 crop cut with ``window`` (the inverse of its last step)."""
+    origin = jnp.asarray(window.origin, jnp.float32)[:, None, :]
+    return (points - origin) * window.ratio.astype(jnp.float32)[:, None, None]
+
+
 def _crop_to_image(crop_xy, window: Window):
     ratio = window.ratio.astype(jnp.float32)[:, None, None]
     return (crop_xy + SIZE / 2) / ratio + jnp.asarray(window.origin, jnp.float32)[:, None, :]

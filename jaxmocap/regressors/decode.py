@@ -66,13 +66,18 @@ def _right_hand_joints(model, right_hand, raw):
 @jax.jit
 def decode_bodies(model: smplx_jax.BodyModel, out: BodyOutput, window: Window) -> BodyPrediction:
     """SMPL rotations -> SMPL-X (global orientation and body joints 1..21; SMPL's hands 22, 23 dropped)."""
-    rotvecs = rotmat_to_rotvec(out.rotmats)
-    n = rotvecs.shape[0]
-    zeros = lambda *shape: jnp.zeros((n,) + shape, rotvecs.dtype)  # noqa: E731
-    mean_hands = [jnp.broadcast_to(model.hand_mean[i].reshape(15, 3), (n, 15, 3)) for i in (0, 1)]
-    params = smplx_jax.SMPLXParams(
-        global_orient=rotvecs[:, 0], body_pose=rotvecs[:, 1:22], left_hand_pose=mean_hands[0],
-        right_hand_pose=mean_hands[1], jaw_pose=zeros(3), leye_pose=zeros(3), reye_pose=zeros(3),
-        betas=out.betas, expression=zeros(model.num_expression), transl=zeros(3))
+    params = jax.vmap(body_params, in_axes=(None, 0, 0))(model, out.rotmats, out.betas)
     joints = jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params)
     return BodyPrediction(params, out.camera, body_to_image(joints, out.camera, window))
+
+
+def body_params(model: smplx_jax.BodyModel, rotmats: Float[Array, "24 3 3"], betas: Float[Array, "10"]
+                ) -> smplx_jax.SMPLXParams:
+    """One body's SMPL rotations -> SMPL-X parameters: global orientation and body joints 1..21 (SMPL's hands 22,
+    23 dropped), the model's mean hands, zero face and translation."""
+    rotvecs = rotmat_to_rotvec(rotmats)
+    zeros = lambda n: jnp.zeros(n, rotvecs.dtype)  # noqa: E731
+    return smplx_jax.SMPLXParams(
+        global_orient=rotvecs[0], body_pose=rotvecs[1:22], left_hand_pose=model.hand_mean[0].reshape(15, 3),
+        right_hand_pose=model.hand_mean[1].reshape(15, 3), jaw_pose=zeros(3), leye_pose=zeros(3),
+        reye_pose=zeros(3), betas=betas, expression=zeros(model.num_expression), transl=zeros(3))

@@ -46,6 +46,11 @@ class Predictor:
         self._hand = nnx.split(regressors.hand)
         self._body = nnx.split(regressors.body)
 
+    @property
+    def body_network(self) -> tuple[nnx.GraphDef, nnx.State]:
+        """The body regressor split into graph and weights (to fine-tune copies of it: `integrate.eft`)."""
+        return self._body
+
     def hand(self, crops: Float[Array, "N 224 224 3"]) -> Float[Array, "N 61"]:
         return self._run(self._hand, crops, np.zeros((0, 61), np.float32))
 

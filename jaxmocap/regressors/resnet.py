@@ -75,9 +75,16 @@ class ResNet(nnx.Module):
             setattr(self, f"layer{stage}", nnx.List(blocks))
 
     def __call__(self, images: Float[Array, "N H W 3"]) -> Float[Array, "N F"]:
+        return jnp.mean(self.stages(self.stem(images)), axis=(1, 2))
+
+    def stem(self, images: Float[Array, "N H W 3"]) -> Float[Array, "N h w 64"]:
+        """conv1, bn1, ReLU, max-pool: the input of ``layer1``."""
         x = jax.nn.relu(self.bn1(self.conv1(images)))
-        x = nnx.max_pool(x, (3, 3), (2, 2), padding=((1, 1), (1, 1)))
-        for stage in (self.layer1, self.layer2, self.layer3, self.layer4):
-            for block in stage:
+        return nnx.max_pool(x, (3, 3), (2, 2), padding=((1, 1), (1, 1)))
+
+    def stages(self, x: Float[Array, "N h w C"], first: int = 1, last: int = 4) -> Float[Array, "N h2 w2 D"]:
+        """``layer{first}`` .. ``layer{last}`` on the output of the stem (first 1) or of ``layer{first - 1}``."""
+        for stage in range(first, last + 1):
+            for block in getattr(self, f"layer{stage}"):
                 x = block(x)
-        return jnp.mean(x, axis=(1, 2))
+        return x
