@@ -39,9 +39,10 @@ def test_second_call_does_not_recompile(default_model_dir):
     model = load(default_model_dir)
     fn = jax.jit(smplx_jax.forward_joints)
     fn(model, _one(random_params(seed=5, batch=1), 0))
+    compiled = fn._cache_size()  # jit wrappers of one function share a cache: other tests may have filled it
     again = smplx_jax.load_model(default_model_dir / "smplx" / "SMPLX_NEUTRAL.npz")  # new arrays, same structure
     fn(again, _one(random_params(seed=6, batch=1), 0))
-    assert fn._cache_size() == 1
+    assert fn._cache_size() == compiled
 
 
 def test_output_shapes(default_model_dir):

@@ -50,7 +50,7 @@ def test_resume_is_bit_identical(tmp_path, body_model):
     assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
     assert straight["eval"] == resumed["eval"]
     rows = [json.loads(line) for line in (tmp_path / "resumed" / "metrics.jsonl").read_text().splitlines()]
-    assert [r["step"] for r in rows] == [1, 2, 3, 4]  # the interrupted run's rows kept, none twice
+    assert [r["step"] for r in rows] == [0, 1, 2, 3, 4]  # the interrupted run's rows kept, none twice
     assert (tmp_path / "resumed" / "curves.png").stat().st_size > 1000
     network = load_network(tmp_path / "resumed" / "weights", "hand")
     assert network.config.depth == 18

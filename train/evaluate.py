@@ -70,7 +70,7 @@ def _joints(model, right_hand, raw: Float[Array, "N 61"]):
 
 def evaluate_hands(network: nnx.Module, model: smplx_jax.BodyModel, right_hand: smplx_jax.HandModel,
                    samples: Sequence[HandSample], batch_size: int = BATCH_SIZE,
-                   limit: int | None = None) -> dict[str, float]:
+                   limit: int | None = None, image_size: int = crops.SIZE) -> dict[str, float]:
     """`hand_metrics` of ``network`` on ``samples`` (the first ``limit`` of them; every batch padded to
     ``batch_size``: one compilation), plus ``count``, the number of samples evaluated."""
     if batch_size < 1 or (limit is not None and limit < 0):
@@ -80,8 +80,8 @@ def evaluate_hands(network: nnx.Module, model: smplx_jax.BodyModel, right_hand: 
     parts = []
     for start in range(0, count, batch_size):
         chunk = [samples[i] for i in range(start, min(start + batch_size, count))]
-        examples = [hand_example(s, crops.SIZE) for s in chunk]
-        images = np.zeros((batch_size, crops.SIZE, crops.SIZE, 3), np.float32)
+        examples = [hand_example(s, image_size) for s in chunk]
+        images = np.zeros((batch_size, image_size, image_size, 3), np.float32)
         images[:len(chunk)] = [e.image for e in examples]
         joints, crop = (np.asarray(a)[:len(chunk)] for a in _joints(model, right_hand, _raw(graphdef, state, images)))
         sides = np.array([pixels_per_crop_unit(s) for s in chunk])[:, None, None]
@@ -138,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--split", default="test")
     parser.add_argument("--limit", type=int, default=None, help="the first N samples of each dataset")
     parser.add_argument("--batch-size", type=int, default=BATCH_SIZE)
+    parser.add_argument("--image-size", type=int, default=crops.SIZE,
+                        help="crop side the network was trained at (default: %(default)s, FrankMocap's)")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
     try:
@@ -153,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         for weights in args.weights.split(","):
             network = load_network(weights, "hand")
             results[weights] = {name: evaluate_hands(network, model, right_hand, samples, args.batch_size,
-                                                               args.limit)
+                                                     args.limit, args.image_size)
                                 for name, samples in opened.items()}
     except (ValueError, OSError, InputError) as err:
         print(f"error: {err}", file=sys.stderr)
@@ -163,7 +165,6 @@ def main(argv: list[str] | None = None) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(dict(split=args.split, limit=args.limit, results=results), indent=2) + "\n")
     return 0
-
 
 
 if __name__ == "__main__":

@@ -63,7 +63,8 @@ def create_network(config: TrainConfig) -> nnx.Module:
     rngs = nnx.Rngs(config.seed)
     if config.kind == "hand":
         network = HandRegressor(HandConfig(depth=config.depth), rngs=rngs)
-        network.mean_params[...] = jnp.zeros(61).at[0].set(HAND_START_CAMERA)
+        start = jnp.zeros(61).at[CAMERA].set(jnp.array([HAND_START_CAMERA, 0.0, 0.0]))
+        network.mean_params[...] = start.at[3:6].set(jnp.array(config.start_wrist_rotvec))
         outputs = [network.regressor]
     else:
         network = BodyRegressor(BodyConfig(depth=config.depth), rngs=rngs)
@@ -235,6 +236,9 @@ def train_and_evaluate(config: TrainConfig, workdir: str | Path, *, model_path: 
                      shard=(jax.process_index(), jax.process_count()))
     began, step = time.perf_counter(), start_step
     with log.open("a") as log_file:
+        if step == 0:  # the untrained regressor predicts its start vector: the mean pose
+            row = {f"eval/{k}": v for k, v in evaluate(setup, eval_fn, state, evals, eval_count).items()}
+            log_file.write(json.dumps({"step": 0, "seconds": 0.0} | row) + "\n")
         while step < config.num_steps:
             state, terms = jitted_train_step(setup, constants, state, global_batch(shardings, next(stream)))
             step += 1

@@ -21,6 +21,7 @@ class TrainConfig:
     eval_split: str = "test"
     depth: int = 50  # ResNet depth (18, 34, 50)
     image_size: int = 224  # crop side; the networks pool globally, so any size runs
+    start_wrist_rotvec: tuple[float, float, float] = (0.0, 0.0, 0.0)  # hand: the regressor's starting wrist
     batch_size: int = 64  # global, over all devices and hosts
     learning_rate: float = 1e-4  # Adam, as the paper
     warmup_steps: int = 0
@@ -55,5 +56,10 @@ def override(config: TrainConfig, assignments: list[str]) -> TrainConfig:
         if not sep or key not in fields:
             raise ValueError(f"--set: expected FIELD=VALUE with FIELD one of {', '.join(fields)}, got {assignment!r}")
         kind = type(getattr(config, key))
-        changes[key] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+        if kind is bool:
+            changes[key] = value.lower() in ("1", "true", "yes")
+        elif kind is tuple:
+            changes[key] = tuple(float(v) for v in value.split(","))
+        else:
+            changes[key] = kind(value)
     return config.replace(**changes)

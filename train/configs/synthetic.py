@@ -2,13 +2,18 @@
 
     python -m train.main --config synthetic --workdir runs/synthetic
 
-Result: see docs/BENCHMARKS.md ("Training").
+Result (2026-11-22, 2-core AMD EPYC, quiet): 2,000 steps of 32 crops (80x80) in 29 min; held-out synthetic hands
+(1,000, disjoint seeds): root-aligned MPJPE 31.4 mm against 63.3 mm for the untrained regressor, which predicts
+the mean pose (-50.4%); PA-MPJPE 16.2 -> 14.1 mm, 2D error 13.8 -> 4.5 crop px. Curves: docs/training_synthetic.png;
+details in docs/BENCHMARKS.md ("Training").
 """
 
 from train.configs import TrainConfig
+from train.datasets.synthetic_poses import HAND_MEAN_ROTVEC
 
 
 def get_config() -> TrainConfig:
-    return TrainConfig(kind="hand", dataset="synthetic_hands", depth=18, image_size=96, batch_size=32,
-                       learning_rate=1e-3, warmup_steps=200, num_steps=4000, time_limit_s=1800, eval_every=250,
-                       eval_examples=500, log_every=25, checkpoint_every=250, workers=2)
+    return TrainConfig(kind="hand", dataset="synthetic_hands", depth=18, image_size=80, batch_size=32,
+                       start_wrist_rotvec=tuple(float(v) for v in HAND_MEAN_ROTVEC),
+                       learning_rate=1e-3, warmup_steps=100, num_steps=2300, time_limit_s=1780, eval_every=250,
+                       eval_examples=500, log_every=25, checkpoint_every=200, workers=2)

@@ -3,9 +3,9 @@
     hands = SyntheticHands(100_000, seed=0)       # Sequence[HandSample]; hands[i] depends on (seed, i) only
     bodies = SyntheticBodies(10_000, seed=0)      # Sequence[BodySample]
 
-Parameters of a sample come from ``np.random.default_rng((seed, i))``; meshes are computed by a jitted, vmapped
-forward pass over a block of consecutive indices (cached), then each sample is placed in front of a pinhole
-camera (focal length chosen so the subject fills a random part of the image) and rendered. Needs no files.
+Parameters of a sample come from ``np.random.default_rng((seed, i))``; its mesh from one jitted forward pass
+(training reads samples in random order, so nothing is batched across indices), then it is placed in front of a
+pinhole camera (focal length chosen so the subject fills a random part of the image) and rendered. Needs no files.
 """
 
 import functools
@@ -27,7 +27,6 @@ from train.datasets.synthetic_render import PinholeCamera, background, camera_ef
 
 TRAIN_SIZE, TEST_SIZE = 100_000, 1000
 _TEST_SEED_OFFSET = 1_000_003  # test seeds never meet train seeds
-_HAND_BLOCK, _BODY_BLOCK = 256, 64
 
 
 @functools.cache
@@ -101,7 +100,7 @@ def _hand_params(model_arrays, seed: int, i: int) -> _HandParams:
     rng = np.random.default_rng((seed, i))
     is_left = bool(rng.random() < 0.5)
     side = 0 if is_left else 1
-    wrist_rotvec = poses.rotmat_to_rotvec(poses.random_rotation(rng))
+    wrist_rotvec = poses.rotmat_to_rotvec(poses.random_hand_orientation(rng))
     hand_pose = poses.random_hand_pose(rng, means[side], components[side])
     betas = np.clip(rng.normal(0.0, 0.8, 10), -2.0, 2.0)
     f = np.float32
@@ -134,8 +133,7 @@ def _forearm(joints: Float[np.ndarray, "21 3"], rng: np.random.Generator):
 
 
 @jax.jit
-@functools.partial(jax.vmap, in_axes=(None, 0, 0, 0))
-def _hand_block_forward(hand: smplx_jax.HandModel, wrist_rotvec, hand_pose, betas) -> smplx_jax.HandOutput:
+def _hand_forward(hand: smplx_jax.HandModel, wrist_rotvec, hand_pose, betas) -> smplx_jax.HandOutput:
     return smplx_jax.hand_forward(hand, rotvec_to_rotmat(wrist_rotvec), hand_pose, betas)
 
 
@@ -149,7 +147,6 @@ class SyntheticHands(Sequence[HandSample]):
         self._pca = (np.asarray(model.hand_mean, np.float64), np.asarray(model.hand_components, np.float64))
         self._hands = (smplx_jax.hand_model(model, "left"), smplx_jax.hand_model(model, "right"))
         self._faces = tuple(np.asarray(h.faces) for h in self._hands)
-        self._block = functools.lru_cache(maxsize=4)(self._compute_block)
 
     def __len__(self) -> int:
         return self.num
@@ -157,20 +154,12 @@ class SyntheticHands(Sequence[HandSample]):
     def params(self, i: int) -> _HandParams:
         return _hand_params(self._pca, self.seed, _index(i, self.num))
 
-    def _compute_block(self, block: int):
-        ids = range(block * _HAND_BLOCK, (block + 1) * _HAND_BLOCK)  # past num: valid parameters, unused
-        params = [_hand_params(self._pca, self.seed, i) for i in ids]
-        stacked = [jnp.asarray(np.stack([getattr(p, f) for p in params])) for f in ("wrist_rotvec", "hand_pose",
-                                                                                      "betas")]
-        outs = [_hand_block_forward(hand, *stacked) for hand in self._hands]
-        return params, [(np.asarray(o.vertices, np.float64), np.asarray(o.joints, np.float64)) for o in outs]
-
     def __getitem__(self, i: int) -> HandSample:
         i = _index(i, self.num)
-        params, outs = self._block(i // _HAND_BLOCK)
-        p = params[i % _HAND_BLOCK]
+        p = _hand_params(self._pca, self.seed, i)
         side = 0 if p.is_left else 1
-        vertices, joints = (a[i % _HAND_BLOCK] for a in outs[side])
+        out = _hand_forward(self._hands[side], p.wrist_rotvec, p.hand_pose, p.betas)
+        vertices, joints = np.asarray(out.vertices, np.float64), np.asarray(out.joints, np.float64)
         rng = np.random.default_rng((self.seed, i, 1))
         size = self.image_size
         transl, camera = _place(rng, vertices, size, rng.uniform(0.3, 0.7), rng.uniform(0.3, 0.8))
@@ -234,8 +223,7 @@ def _face_regions(model: smplx_jax.BodyModel) -> np.ndarray:
 
 
 @jax.jit
-@functools.partial(jax.vmap, in_axes=(None, 0, 0, 0))
-def _body_block_forward(model: smplx_jax.BodyModel, global_orient, body_pose, betas):
+def _body_forward(model: smplx_jax.BodyModel, global_orient, body_pose, betas):
     """Vertices and BODY_25 joints, hands at the model's mean pose."""
     params = smplx_jax.SMPLXParams.zeros(model.num_betas, model.num_expression, global_orient.dtype).replace(
         global_orient=global_orient, body_pose=body_pose, betas=betas,
@@ -254,7 +242,6 @@ class SyntheticBodies(Sequence[BodySample]):
         self._model = model
         self._faces = np.asarray(model.faces)
         self._regions = _face_regions(model)
-        self._block = functools.lru_cache(maxsize=2)(self._compute_block)
 
     def __len__(self) -> int:
         return self.num
@@ -262,15 +249,10 @@ class SyntheticBodies(Sequence[BodySample]):
     def params(self, i: int) -> _BodyParams:
         return _body_params(self.seed, _index(i, self.num))
 
-    def _compute_block(self, block: int):
-        params = [_body_params(self.seed, i) for i in range(block * _BODY_BLOCK, (block + 1) * _BODY_BLOCK)]
-        vertices, joints = _body_block_forward(self._model, *(jnp.asarray(np.stack(a)) for a in zip(*params)))
-        return params, np.asarray(vertices, np.float64), np.asarray(joints, np.float64)
-
     def __getitem__(self, i: int) -> BodySample:
         i = _index(i, self.num)
-        params, all_vertices, all_joints = self._block(i // _BODY_BLOCK)
-        p, vertices, joints = params[i % _BODY_BLOCK], all_vertices[i % _BODY_BLOCK], all_joints[i % _BODY_BLOCK]
+        p = _body_params(self.seed, i)
+        vertices, joints = (np.asarray(a, np.float64) for a in _body_forward(self._model, *p))
         rng = np.random.default_rng((self.seed, i, 1))
         size = self.image_size
         transl, camera = _place(rng, vertices, size, rng.uniform(0.5, 0.9), rng.uniform(2.0, 6.0))

@@ -59,19 +59,24 @@ def rotvec_to_rotmat(rotvec: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]
     angle = np.linalg.norm(rotvec)
     if angle < 1e-12:
         return np.eye(3)
-    k = np.cross(np.eye(3), rotvec / angle)  # skew matrix, row-wise
-    return np.eye(3) + np.sin(angle) * k.T + (1 - np.cos(angle)) * (k.T @ k.T)
+    k = np.cross(np.eye(3), rotvec / angle)  # the cross-product matrix [axis]x (row i = e_i x axis)
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
 
 
-def random_rotation(rng: np.random.Generator) -> Float[np.ndarray, "3 3"]:
-    """Uniform on SO(3) (normalised Gaussian quaternion)."""
-    q = rng.normal(size=4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+HAND_MEAN_ROTVEC = np.array([np.pi / 2, 0.0, 0.0])
+"""The synthetic hands' mean camera-frame wrist orientation: SMPL-X's rest hand (palm down, y up) turned so its palm
+faces the camera."""
+HAND_MAX_TURN = 1.4
+"""Largest turn (rad) away from `HAND_MEAN_ROTVEC`: palm, back and side views, never near the axis-angle
+wrap-around at pi."""
+
+
+def random_hand_orientation(rng: np.random.Generator) -> Float[np.ndarray, "3 3"]:
+    """A camera-frame wrist rotation: the mean orientation turned about a uniformly random axis by an angle uniform
+    in [0, `HAND_MAX_TURN`]."""
+    axis = rng.normal(size=3)
+    turn = rotvec_to_rotmat(rng.uniform(0.0, HAND_MAX_TURN) * axis / np.linalg.norm(axis))
+    return turn @ rotvec_to_rotmat(HAND_MEAN_ROTVEC)
 
 
 def random_hand_pose(
