@@ -44,11 +44,13 @@ out = {}
 with mp.solutions.holistic.Holistic(static_image_mode=False, model_complexity=1) as h:
     def hol(f):
         r = h.process(f)
-        return int(r.pose_landmarks is not None), (r.left_hand_landmarks is not None) + (r.right_hand_landmarks is not None)
+        hands = (r.left_hand_landmarks is not None) + (r.right_hand_landmarks is not None)
+        return int(r.pose_landmarks is not None), hands
     out["holistic"] = timed(hol)
 with mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1) as p, \
         mp.solutions.hands.Hands(static_image_mode=False, max_num_hands=2, model_complexity=1) as hd:
-    out["pose+hands"] = timed(lambda f: (int(p.process(f).pose_landmarks is not None), len(hd.process(f).multi_hand_landmarks or [])))
+    out["pose+hands"] = timed(lambda f: (int(p.process(f).pose_landmarks is not None),
+                                         len(hd.process(f).multi_hand_landmarks or [])))
 with mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1) as p:
     out["pose"] = timed(lambda f: (int(p.process(f).pose_landmarks is not None), 0))
 print(json.dumps({"version": mp.__version__, "results": out}))
@@ -116,7 +118,8 @@ def main() -> None:
     print(f"{'pipeline':<48}{'ms/frame':>10}{'body found':>12}{'hands found':>13}")
     for name, row in rows.items():
         ms = row["ms_per_frame"]
-        print(f"{name:<48}{(f'{ms:.1f}' if isinstance(ms, float) else ms):>10}{row.get('frames_with_body', ''):>12}{row.get('hands', ''):>13}")
+        ms_text = f"{ms:.1f}" if isinstance(ms, float) else ms
+        print(f"{name:<48}{ms_text:>10}{row.get('frames_with_body', ''):>12}{row.get('hands', ''):>13}")
     out = args.out / "detect.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"clip": CLIP.name, "frames": len(frames), "cpus": os.cpu_count(), "rows": rows},

@@ -70,7 +70,8 @@ def _iou(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
 
 
 def weighted_nms(detections: list[Detection], threshold: float = 0.3) -> list[Detection]:
-    """Weighted non-maximum suppression: each kept detection is the score-weighted mean of its IoU > threshold cluster."""
+    """Weighted non-maximum suppression: each kept detection is the score-weighted mean of its IoU > threshold
+    cluster."""
     remaining = sorted(detections, key=lambda d: -d.score)
     out = []
     while remaining:

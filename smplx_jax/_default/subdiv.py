@@ -56,23 +56,29 @@ def catmull_clark(quads, nv):
     edges, fe = edges_of(quads)
     ne = len(edges)
     rows, cols, vals = [], [], []
+
+    def add(r, c, v):
+        rows.append(r)
+        cols.append(c)
+        vals.append(v)
+
     fp = nv + ne + np.arange(nf)
     # face points
-    rows.append(np.repeat(fp, 4)); cols.append(quads.ravel()); vals.append(np.full(4 * nf, 0.25))
+    add(np.repeat(fp, 4), quads.ravel(), np.full(4 * nf, 0.25))
     # edge points: 1/4 each endpoint + 1/4 each adjacent face point (1/16 per face corner)
-    rows.append(nv + np.repeat(np.arange(ne), 2)); cols.append(edges.ravel()); vals.append(np.full(2 * ne, 0.25))
+    add(nv + np.repeat(np.arange(ne), 2), edges.ravel(), np.full(2 * ne, 0.25))
     ef = fe.ravel()  # each face corner names one edge adjacent to that face
     face_of = np.repeat(np.arange(nf), 4)
-    rows.append(np.repeat(nv + ef, 4)); cols.append(quads[face_of].ravel()); vals.append(np.full(16 * nf, 1 / 16))
+    add(np.repeat(nv + ef, 4), quads[face_of].ravel(), np.full(16 * nf, 1 / 16))
     # vertex points: (Favg + 2 Ravg + (n-3) P) / n
     val = np.bincount(edges.ravel(), minlength=nv).astype(float)
     vf = quads.ravel()  # vertex of each corner, its face's 4 vertices at 1/(4 n^2)
-    rows.append(np.repeat(vf, 4)); cols.append(quads[face_of].ravel())
-    vals.append(np.repeat(1.0 / (4 * val[vf] ** 2), 4))
+    add(np.repeat(vf, 4), quads[face_of].ravel(), np.repeat(1.0 / (4 * val[vf] ** 2), 4))
     for s, o in ((0, 1), (1, 0)):  # edge midpoints: each edge (v, w) adds (v + w) / (n^2) to v
         v, w = edges[:, s], edges[:, o]
-        rows += [v, v]; cols += [v, w]; vals += [1.0 / val[v] ** 2, 1.0 / val[v] ** 2]
-    rows.append(np.arange(nv)); cols.append(np.arange(nv)); vals.append((val - 3) / val)
+        add(v, v, 1.0 / val[v] ** 2)
+        add(v, w, 1.0 / val[v] ** 2)
+    add(np.arange(nv), np.arange(nv), (val - 3) / val)
     op = Sparse(np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), (nv + ne + nf, nv))
     ep = nv + fe
     new = np.stack([quads, ep, np.repeat(fp[:, None], 4, 1), np.roll(ep, 1, axis=1)], axis=2)  # (F,4 corners,4)
