@@ -4,6 +4,7 @@ box from 2D joints, FrankMocap's knuckle-length rescaling of 3D joints, and the 
 OpenPose hand order: wrist, thumb 1-4, index 1-4, middle 1-4, ring 1-4, pinky 1-4 (1 = the base joint, 4 = the tip).
 """
 
+import pickle
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -154,6 +155,19 @@ def require_file(path: Path, expected: str) -> Path:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: missing; expected {expected}")
     return path
+
+
+def load_pickled_dict(path: Path, expected: str) -> dict:
+    """The dict pickled (by Python 2, hence latin1) in ``path``; errors name the file and ``expected``."""
+    require_file(path, expected)
+    try:
+        with path.open("rb") as file:
+            values = pickle.load(file, encoding="latin1")
+    except (pickle.UnpicklingError, EOFError, ValueError) as error:
+        raise ValueError(f"{path}: corrupt pickle ({error})") from None
+    if not isinstance(values, dict):
+        raise ValueError(f"{path}: expected {expected}, got {type(values).__name__}")
+    return values
 
 
 def checked_array(values, shape: tuple[int, ...], source: str, what: str) -> np.ndarray:

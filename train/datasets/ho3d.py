@@ -11,7 +11,6 @@
 R_cv = diag(1, -1, -1) R_gl. Right hands only. MANO's finger order is SMPL-X's.
 """
 
-import pickle
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -25,6 +24,7 @@ from train.datasets.hand_joints import (
     checked_array,
     hand_labels,
     hand_samples,
+    load_pickled_dict,
     project,
     require_file,
 )
@@ -41,18 +41,6 @@ def _frame_ids(root: Path, set_name: str) -> list[str]:
     if bad:
         raise ValueError(f"{path}: line {bad[0]!r} is not SEQ/FRAME")
     return ids
-
-
-def _load_meta(path: Path) -> dict:
-    require_file(path, "a pickled dict of HO-3D labels")
-    try:
-        with path.open("rb") as file:
-            meta = pickle.load(file, encoding="latin1")
-    except (pickle.UnpicklingError, EOFError, ValueError) as error:
-        raise ValueError(f"{path}: corrupt pickle ({error})") from None
-    if not isinstance(meta, dict):
-        raise ValueError(f"{path}: expected a dict of labels, got {type(meta).__name__}")
-    return meta
 
 
 def _field(meta: dict, key: str, shape: tuple[int, ...], path: Path) -> np.ndarray:
@@ -78,7 +66,7 @@ def read(root: Path, split: str) -> Sequence[HandSample]:
         seq, frame = frame_id.split("/")
         seq_dir = root / set_name / seq
         meta_path = seq_dir / "meta" / f"{frame}.pkl"
-        meta = _load_meta(meta_path)
+        meta = load_pickled_dict(meta_path, "a pickled dict of HO-3D labels")
         if meta.get("handJoints3D") is None:
             continue
         camera = _field(meta, "camMat", (3, 3), meta_path)

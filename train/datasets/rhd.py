@@ -10,7 +10,6 @@ do not become samples. All 21 2D keypoints are labels (exact projections of the 
 box covers them all.
 """
 
-import pickle
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -22,23 +21,12 @@ from train.datasets.hand_joints import (
     checked_array,
     hand_labels,
     hand_samples,
-    require_file,
+    load_pickled_dict,
 )
 from train.datasets.sample import HandSample
 
 SET_NAMES = {"train": "training", "test": "evaluation"}
-
-
-def _load_annotations(path: Path) -> dict:
-    require_file(path, "a pickled dict {sample id: {'uv_vis', 'xyz', 'K'}}")
-    try:
-        with path.open("rb") as file:
-            annotations = pickle.load(file, encoding="latin1")
-    except (pickle.UnpicklingError, EOFError, ValueError) as error:
-        raise ValueError(f"{path}: corrupt pickle ({error})") from None
-    if not isinstance(annotations, dict):
-        raise ValueError(f"{path}: expected a dict of samples, got {type(annotations).__name__}")
-    return annotations
+EXPECTED = "a pickled dict {sample id: {'uv_vis', 'xyz', 'K'}}"
 
 
 def read(root: Path, split: str) -> Sequence[HandSample]:
@@ -47,7 +35,7 @@ def read(root: Path, split: str) -> Sequence[HandSample]:
     set_name, root = SET_NAMES[split], Path(root)
     path = root / set_name / f"anno_{set_name}.pickle"
     paths, joints_2d, joints_3d, is_left = [], [], [], []
-    for sample_id, annotation in sorted(_load_annotations(path).items()):
+    for sample_id, annotation in sorted(load_pickled_dict(path, EXPECTED).items()):
         source = f"{path} sample {sample_id}"
         if not isinstance(annotation, dict) or not {"uv_vis", "xyz"} <= annotation.keys():
             raise ValueError(f"{source}: expected a dict with 'uv_vis' (42,3) and 'xyz' (42,3)")
