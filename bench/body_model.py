@@ -1,7 +1,8 @@
 """Body model speed: frames/s of smplx_jax's full forward and joints-only path against the PyTorch ``smplx``
 package's forward, batch 1, 64 and 1024, float32, same machine, same run, same threads. The model file is the
 default model with random pose correctives (its own are zero; a real file's are dense), so that nothing is
-faster for zeros. The three are timed in turns, call after call, so that all see the same machine load.
+faster for zeros. The three are timed in rounds, each at its steady state, so that all see the same
+machine load.
 
     python bench/body_model.py [--out bench/results] [--quick]      (or: jaxmocap bench --only body_model)
 """
@@ -19,18 +20,28 @@ import jax
 import numpy as np
 
 
-def _time_in_turns(fns, min_seconds, min_reps=5):
-    """Median seconds per call of each function, calling them in turns."""
-    for fn in fns:  # warm-up (compilation for JAX)
-        fn()
+def _time_in_rounds(fns, min_seconds, block_seconds=0.3, warm_seconds=0.1, min_rounds=3):
+    """Median seconds per call of each function at its steady state. In each round every function runs back to
+    back: calls for ``warm_seconds`` untimed (a call right after another workload or a pause runs up to 2x
+    slower here: threads and caches are cold), then timed calls for ``block_seconds``; rounds repeat so that all
+    see the same machine load."""
+    for fn in fns:  # compilation for JAX
         fn()
     times = [[] for _ in fns]
     start = time.perf_counter()
-    while len(times[0]) < min_reps or time.perf_counter() - start < min_seconds:
+    rounds = 0
+    while rounds < min_rounds or time.perf_counter() - start < min_seconds:
         for fn, fn_times in zip(fns, times):
-            t0 = time.perf_counter()
-            fn()
-            fn_times.append(time.perf_counter() - t0)
+            for seconds, record in ((warm_seconds, False), (block_seconds, True)):
+                block_start = time.perf_counter()
+                while True:
+                    t0 = time.perf_counter()
+                    fn()
+                    if record:
+                        fn_times.append(time.perf_counter() - t0)
+                    if time.perf_counter() - block_start >= seconds:
+                        break
+        rounds += 1
     return [statistics.median(t) for t in times]
 
 
@@ -72,7 +83,7 @@ def _measure(path: Path, batch: int, min_seconds: float) -> dict:
         with torch.no_grad():
             return torch_model(**tp, return_verts=True)
 
-    t_full, t_joints, t_torch = _time_in_turns(
+    t_full, t_joints, t_torch = _time_in_rounds(
         [lambda: jax.block_until_ready(full(model, params)), lambda: jax.block_until_ready(joints(model, params)),
          torch_forward], min_seconds)
     return dict(batch=batch, jax_full_fps=batch / t_full, jax_joints_fps=batch / t_joints,

@@ -85,12 +85,11 @@ def _gathered_blend(transforms, joints, weights) -> Float[Array, "12 N"]:
     return sum(weights[i] * transforms[:, joints[i]] for i in range(joints.shape[0]))
 
 
-def _skin(blended, points_cm, offset):
-    """Rest-pose points ``(3, N)`` moved by their blended transforms ``(12, N)``, plus ``offset (3,)``;
-    returns ``(N, 3)``."""
+def _skin(blended, points_cm, axis: int):
+    """Rest-pose points ``(3, N)`` moved by their blended transforms ``(12, N)``; coordinates along ``axis``."""
     x, y, z = points_cm
-    return jnp.stack([blended[3 * c] * x + blended[3 * c + 1] * y + blended[3 * c + 2] * z + blended[9 + c] + offset[c]
-                      for c in range(3)], axis=-1)
+    return jnp.stack([blended[3 * c] * x + blended[3 * c + 1] * y + blended[3 * c + 2] * z + blended[9 + c]
+                      for c in range(3)], axis=axis)
 
 
 def _posed_points(template_cm, shapedirs_cm, posedirs_cm, shape, rel_rotmats):
@@ -116,10 +115,10 @@ def _joints(model, shape, rel_rotmats, transforms, positions, transl):
     the vertices that vertex joints and landmarks read are shaped, posed and skinned."""
     points = _posed_points(model.sparse_template_cm, model.sparse_shapedirs_cm, model.sparse_posedirs_cm, shape,
                            rel_rotmats)
-    sparse_vertices = _skin(transforms @ model.sparse_weights_t, points, transl)
-    vertex_joints = sparse_vertices[model.vertex_joint_slots]
-    landmarks = jnp.einsum("lkc,lk->lc", sparse_vertices[model.landmark_slots], model.landmark_bary)
-    return jnp.concatenate([positions + transl, vertex_joints, landmarks])
+    vertices = _skin(_gathered_blend(transforms, model.sparse_skin_joints, model.sparse_skin_weights), points, 0)
+    vertex_joints = vertices[:, model.vertex_joint_slots]
+    landmarks = sum(model.landmark_bary[:, k] * vertices[:, model.landmark_slots[:, k]] for k in range(3))
+    return jnp.concatenate([positions, vertex_joints.T, landmarks.T]) + transl
 
 
 def forward(model: BodyModel, params: SMPLXParams) -> Output:
@@ -131,7 +130,7 @@ def forward(model: BodyModel, params: SMPLXParams) -> Output:
         blended = _gathered_blend(transforms, model.skin_joints, model.skin_weights)
     else:
         blended = transforms @ model.weights_t
-    vertices = _skin(blended, points, params.transl)
+    vertices = _skin(blended, points, -1) + params.transl
     return Output(vertices, _joints(model, shape, rel_rotmats, transforms, positions, params.transl))
 
 

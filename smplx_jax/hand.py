@@ -96,7 +96,7 @@ def hand_forward(
     glob_rotmats, positions = kinematic_chain(rel_rotmats, rest_joints, hand.parents)
     points = _posed_points(hand.template_cm, hand.shapedirs_cm, hand.posedirs_cm, betas, rel_rotmats)
     blended = _skinning_transforms(glob_rotmats, positions, rest_joints) @ hand.weights_t
-    vertices = _skin(blended, points, -positions[0])
+    vertices = _skin(blended, points, -1) - positions[0]
     joints = jnp.concatenate([positions - positions[0], vertices[hand.tip_slots]])
     return HandOutput(vertices, joints[jnp.array(_OPENPOSE_ORDER)])
 

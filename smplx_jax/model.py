@@ -46,7 +46,8 @@ class BodyModel:
     sparse_template_cm: Float[Array, "3 K"]
     sparse_shapedirs_cm: Float[Array, "S 3K"]
     sparse_posedirs_cm: Float[Array, "P 3K"]
-    sparse_weights_t: Float[Array, "J K"]
+    sparse_skin_joints: Int[Array, "I K"]
+    sparse_skin_weights: Float[Array, "I K"]
     vertex_joint_slots: Int[Array, "21"]  # vertex joints as indices into the sparse vertices
     landmark_slots: Int[Array, "51 3"]  # landmark triangles as indices into the sparse vertices
     landmark_bary: Float[Array, "51 3"]
@@ -106,6 +107,7 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
     weights = arrays["weights"]
     influences = max(1, int(np.count_nonzero(weights, axis=1).max()))
     skin_joints = np.argsort(-weights, axis=1, kind="stable")[:, :influences]
+    skin_weights = np.take_along_axis(weights, skin_joints, axis=1)
 
     hand_components = np.stack([arrays["hands_componentsl"], arrays["hands_componentsr"]])
     f = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
@@ -115,7 +117,7 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
         posedirs_cm=f(_coordinate_major(posedirs)),
         weights_t=f(weights.T),
         skin_joints=jnp.asarray(skin_joints.T, dtype=jnp.int32),
-        skin_weights=f(np.take_along_axis(weights, skin_joints, axis=1).T),
+        skin_weights=f(skin_weights.T),
         joint_template=f(j_regressor @ v_template),
         joint_shapedirs=f(np.einsum("jv,vcs->jcs", j_regressor, shapedirs)),
         faces=jnp.asarray(faces, dtype=jnp.int32),
@@ -125,7 +127,8 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
         sparse_template_cm=f(v_template[sparse_ids].T),
         sparse_shapedirs_cm=f(_coordinate_major(shapedirs[sparse_ids])),
         sparse_posedirs_cm=f(_coordinate_major(posedirs[sparse_ids])),
-        sparse_weights_t=f(weights[sparse_ids].T),
+        sparse_skin_joints=jnp.asarray(skin_joints[sparse_ids].T, dtype=jnp.int32),
+        sparse_skin_weights=f(skin_weights[sparse_ids].T),
         vertex_joint_slots=jnp.asarray(slots[:num_vertex_joints], dtype=jnp.int32),
         landmark_slots=jnp.asarray(slots[num_vertex_joints:].reshape(-1, 3), dtype=jnp.int32),
         landmark_bary=f(arrays["lmk_bary_coords"]),

@@ -11,10 +11,17 @@ from jaxtyping import Array, Float
 _SMALL = 1e-6  # squared angle (or squared sine) below which the series are exact to float64 rounding
 
 
-def _skew(v: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
-    x, y, z = v[..., 0], v[..., 1], v[..., 2]
-    zero = jnp.zeros_like(x)
-    return jnp.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(v.shape[:-1] + (3, 3))
+def skew_polynomial(rotvec: Float[Array, "... 3"], a: Float[Array, "..."], b: Float[Array, "..."]):
+    """``I + a K + b K^2`` with ``K = skew(rotvec)``, written out entry by entry with ``K^2 = v v^T - |v|^2 I``
+    (XLA fuses it into a few loops; a batch of tiny matrix products is far slower on CPU)."""
+    x, y, z = rotvec[..., 0], rotvec[..., 1], rotvec[..., 2]
+    diagonal = 1.0 - b * (x * x + y * y + z * z)
+    ax, ay, az = a * x, a * y, a * z
+    bx, by, bz = b * x, b * y, b * z
+    entries = [diagonal + bx * x, bx * y - az, bx * z + ay,
+               bx * y + az, diagonal + by * y, by * z - ax,
+               bx * z - ay, by * z + ax, diagonal + bz * z]
+    return jnp.stack(entries, axis=-1).reshape(rotvec.shape[:-1] + (3, 3))
 
 
 def rotvec_to_rotmat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
@@ -25,9 +32,7 @@ def rotvec_to_rotmat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
     theta = jnp.sqrt(jnp.where(small, 1.0, theta2))
     sinc = jnp.where(small, 1.0 - theta2 / 6.0 + theta2**2 / 120.0, jnp.sin(theta) / theta)
     cosc = jnp.where(small, 0.5 - theta2 / 24.0 + theta2**2 / 720.0, (1.0 - jnp.cos(theta)) / (theta * theta))
-    k = _skew(rotvec)
-    eye = jnp.eye(3, dtype=rotvec.dtype)
-    return eye + sinc[..., None, None] * k + cosc[..., None, None] * (k @ k)
+    return skew_polynomial(rotvec, sinc, cosc)
 
 
 def rotmat_to_quat(rotmat: Float[Array, "... 3 3"]) -> Float[Array, "... 4"]:

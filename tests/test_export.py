@@ -188,6 +188,8 @@ def test_export_command(case, tmp_path, capsys):
         assert main(["export", str(path), "--format", fmt, "--out", str(tmp_path / name)]) == 0
     assert (tmp_path / "motion.bvh").read_text().startswith("HIERARCHY")
     assert json.loads((tmp_path / "motion.gltf").read_text())["buffers"][0]["uri"].startswith("data:")
+    assert (tmp_path / "motion.glb").stat().st_mode & 0o777 == 0o644  # readable by others, as open() makes files
+    assert not list(tmp_path.glob(".*.tmp"))
     capsys.readouterr()
 
     np.savez(tmp_path / "other.npz", **(motion | {"model_sha256": np.array("0" * 64)}))

@@ -1,7 +1,7 @@
 """Frames spread over several devices give the same fit as on one device (4 CPU devices in a subprocess).
 
-"The same" up to float32 rounding: per-device batches sum in another order, and 20 Levenberg-Marquardt steps
-magnify that in directions the keypoints do not pin down; the fit's quality (per-frame error) is what must agree.
+In float64: in float32 per-device batches round in another order, and 20 Levenberg-Marquardt steps magnify that
+in directions the keypoints do not pin down (seen keypoints then differ by up to 2 px between equally good fits).
 """
 
 import os
@@ -17,7 +17,7 @@ SCRIPT = textwrap.dedent("""
     from jaxmocap.sharding import frame_sharding
 
     assert len(jax.devices()) == 4
-    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    model = smplx_jax.load_model(smplx_jax.default_model_path(), dtype=np.float64)
     problem = synthetic.make_problem(model, 8, seed=3)
     assert frame_sharding(8) is not None and frame_sharding(1) is None
     sharded = fit(model, problem.keypoints, init=problem.init)
@@ -29,12 +29,14 @@ SCRIPT = textwrap.dedent("""
     error_gap = np.abs(np.asarray(sharded.reprojection_error_px) - np.asarray(single.reprojection_error_px))
     print("max projection difference px", float(np.abs(a - b).max()), "error difference px", float(error_gap.max()))
     assert np.array_equal(np.asarray(sharded.status), np.asarray(single.status))
-    assert error_gap.max() < 0.05 and np.abs(a - b).max() < 1.0
+    assert sharded.params.body_pose.dtype == np.float64
+    assert error_gap.max() < 1e-8 and np.abs(a - b).max() < 1e-6
 """)
 
 
 def test_sharded_fit_equals_single_device():
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu",
+               JAX_ENABLE_X64="1")
     proc = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     print(proc.stdout)

@@ -131,8 +131,8 @@ def params_from_full_pose(theta, betas, num_expression: int) -> SMPLXParams:
     return jax.vmap(lambda t, b: solver.params_of(t, b, num_expression))(theta, betas)
 
 
-def _check(name, value, shape):
-    value = np.asarray(value, np.float32)
+def _check(name, value, shape, dtype):
+    value = np.asarray(value, dtype)
     if value.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {value.shape}")
     if not np.all(np.isfinite(value)):
@@ -147,25 +147,27 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
     """Fit every frame of ``keypoints (T, 67, 3)`` (pixels; confidence 0 = missing; NaN/inf keypoints are treated
     as missing). ``init``: batched `SMPLXParams` (T leading; hand poses absolute; ``transl`` ignored, fits use 0);
     default `default_pose` with mean shape. Camera: given, or fitted to the initial pose's keypoints.
-    ``progress(n)`` is called after each chunk with the number of frames done."""
+    ``progress(n)`` is called after each chunk with the number of frames done. Runs in the model's precision
+    (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64)."""
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
-    keypoints = np.asarray(keypoints, np.float32)
+    dtype = np.dtype(model.joint_template.dtype)
+    keypoints = np.asarray(keypoints, dtype)
     if keypoints.ndim != 3 or keypoints.shape[1:] != (67, 3):
         raise ValueError(f"keypoints must have shape (T, 67, 3), got {keypoints.shape}")
     t = keypoints.shape[0]
     nb = model.num_betas
     if init is None:
-        theta = np.broadcast_to(np.asarray(default_pose()), (t, 55, 3))
-        betas = np.zeros((t, nb), np.float32)
+        theta = np.broadcast_to(np.asarray(default_pose(dtype)), (t, 55, 3))
+        betas = np.zeros((t, nb), dtype)
     else:
-        theta = _check("init pose", full_pose_of(init), (t, 55, 3))
-        betas = _check("init betas", init.betas, (t, nb))
+        theta = _check("init pose", full_pose_of(init), (t, 55, 3), dtype)
+        betas = _check("init betas", init.betas, (t, nb), dtype)
     has_cam = camera_scale is not None
     if has_cam:
-        cam = np.concatenate([_check("camera_scale", camera_scale, (t,))[:, None],
-                              _check("camera_trans", camera_trans, (t, 2))], axis=1)
+        cam = np.concatenate([_check("camera_scale", camera_scale, (t,), dtype)[:, None],
+                              _check("camera_trans", camera_trans, (t, 2), dtype)], axis=1)
     else:
-        cam = np.ones((t, 3), np.float32)
+        cam = np.ones((t, 3), dtype)
     km = openpose_keypoint_model(model)
     outs = []
     for start in range(0, t, BUCKETS[-1]):

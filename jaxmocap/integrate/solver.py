@@ -69,7 +69,8 @@ def _trimmed_body(model: BodyModel) -> BodyModel:
         sparse_template_cm=model.sparse_template_cm[:, slots],
         sparse_shapedirs_cm=model.sparse_shapedirs_cm[:, cols],
         sparse_posedirs_cm=model.sparse_posedirs_cm[:, cols],
-        sparse_weights_t=model.sparse_weights_t[:, slots],
+        sparse_skin_joints=model.sparse_skin_joints[:, slots],
+        sparse_skin_weights=model.sparse_skin_weights[:, slots],
         vertex_joint_slots=jnp.arange(n, dtype=jnp.int32),
         landmark_slots=jnp.zeros_like(model.landmark_slots),
     )
@@ -89,7 +90,8 @@ def keypoint_model(model: BodyModel, index) -> KeypointModel:
         while j >= 0:
             ancestors[j, joint] = 1.0
             j = parents[j]
-    vertex_weights = np.asarray(model.sparse_weights_t)[:, np.asarray(model.vertex_joint_slots)].T  # (21, 55)
+    vertex_ids = np.asarray(model.sparse_ids)[np.asarray(model.vertex_joint_slots)]
+    vertex_weights = np.asarray(model.weights_t)[:, vertex_ids].T  # (21, 55)
     nb = model.num_betas
     joint_sd = np.asarray(model.joint_shapedirs)[..., :nb]  # (55, 3, B)
     ks = np.asarray(model.sparse_ids).shape[0]
@@ -151,8 +153,7 @@ def left_jacobian(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
     t2s = jnp.where(small, 1.0, t2)
     c1 = jnp.where(small, 0.5 - t2 / 24.0, (1.0 - jnp.cos(t)) / t2s)
     c2 = jnp.where(small, 1.0 / 6.0 - t2 / 120.0, (t - jnp.sin(t)) / (t2s * t))
-    k = smplx_jax.rotations._skew(rotvec)
-    return jnp.eye(3, dtype=rotvec.dtype) + c1[..., None, None] * k + c2[..., None, None] * (k @ k)
+    return smplx_jax.rotations.skew_polynomial(rotvec, c1, c2)
 
 
 def params_of(theta, betas, num_expression) -> SMPLXParams:

@@ -200,8 +200,9 @@ class BodyCage:
             return place
 
         root = np.mean([c.pos[v] for v in c.faces[f]], 0)
-        for center, a, b in ((0.5 * (root + t1 + 0.026 * d) + 0.006 * Z, 0.0150, 0.0118), (t2 + 0.0008 * up, 0.0105, 0.0095),
-                             (t3 + 0.0008 * up, 0.0094, 0.0084), (tip - 0.0045 * d + 0.0008 * up, 0.0060, 0.0052)):
+        for center, a, b in ((0.5 * (root + t1 + 0.026 * d) + 0.006 * Z, 0.0150, 0.0118),
+                             (t2 + 0.0008 * up, 0.0105, 0.0095), (t3 + 0.0008 * up, 0.0094, 0.0084),
+                             (tip - 0.0045 * d + 0.0008 * up, 0.0060, 0.0052)):
             m = c.extrude([f], part, ring(center, a, b))
             tslot.update({m[v]: tslot[v] for v in list(tslot) if v in m})
 
@@ -242,14 +243,14 @@ class BodyCage:
             return mapping
 
         gm = g * m
-        l = sk.ly
-        extrude(ring(np.array([H[0] + s * 0.018, l(-0.600), 0.002]), 0.072 * gm, 0.070 * gm, 0.072 * gm, 0.076 * gm))
+        ly = sk.ly
+        extrude(ring(np.array([H[0] + s * 0.018, ly(-0.600), 0.002]), 0.072 * gm, 0.070 * gm, 0.072 * gm, 0.076 * gm))
         extrude(ring(H + 0.72 * (K - H) + (s * 0.008, 0, 0.010), 0.062 * gm, 0.060 * gm, 0.062 * gm, 0.058 * gm))
         extrude(ring(K + (0, 0, 0.004), 0.047 * g, 0.050 * g, 0.052 * g, 0.043 * g))
-        extrude(ring(np.array([K[0] - s * 0.004, l(-0.955), -0.016]), 0.045 * gm, 0.049 * gm, 0.037 * g,
+        extrude(ring(np.array([K[0] - s * 0.004, ly(-0.955), -0.016]), 0.045 * gm, 0.049 * gm, 0.037 * g,
                      0.056 * gm))
-        r5 = extrude(ring(np.array([A[0], l(-1.163), A[2] + 0.004]), 0.029, 0.031, 0.030, 0.034))
-        r6 = extrude(ring(np.array([A[0] + s * 0.002, l(-1.268), A[2] + 0.010]), 0.035, 0.035, 0.050, 0.057,
+        r5 = extrude(ring(np.array([A[0], ly(-1.163), A[2] + 0.004]), 0.029, 0.031, 0.030, 0.034))
+        r6 = extrude(ring(np.array([A[0] + s * 0.002, ly(-1.268), A[2] + 0.010]), 0.035, 0.035, 0.050, 0.057,
                           ydrop=-0.034))
         # foot from the two front wall faces between the ankle and heel rings
         s5 = {round(np.degrees(slot[v])): v for v in r5.values() if v in slot}
@@ -263,7 +264,7 @@ class BodyCage:
         foot = "l_foot" if s > 0 else "r_foot"
         toe_out = np.radians(7.0) * s
         R = np.array([[np.cos(toe_out), 0, np.sin(toe_out)], [0, 1, 0], [-np.sin(toe_out), 0, np.cos(toe_out)]])
-        y0 = l(-1.300)
+        y0 = ly(-1.300)
 
         def foot_ring(dz, tops, bots, xs):
             def place(v):

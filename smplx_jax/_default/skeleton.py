@@ -83,7 +83,7 @@ class Skeleton:
 
     def _joints(self):
         J = np.zeros((55, 3))
-        t, l, hw, sw = self.ty, self.ly, self.hip_w, self.shoulder_w
+        t, ly, hw, sw = self.ty, self.ly, self.hip_w, self.shoulder_w
         J[0] = (0, t(-0.352), 0.012)
         J[3] = (0, t(-0.235), -0.012)
         J[6] = (0, t(-0.108), -0.008)
@@ -93,9 +93,9 @@ class Skeleton:
         for s, (hip, knee, ankle, foot, collar, sh, el, wr) in ((1, (1, 4, 7, 10, 13, 16, 18, 20)),
                                                                  (-1, (2, 5, 8, 11, 14, 17, 19, 21))):
             J[hip] = (s * (0.066 * hw + 0.06 * (self.girth - 1)), self.HIP_Y, -0.004)
-            J[knee] = (J[hip][0] + s * 0.036, l(-0.825), -0.004)
-            J[ankle] = (J[hip][0] + s * 0.018, l(-1.212), -0.046)
-            J[foot] = (J[hip][0] + s * 0.046, l(-1.212) - 0.068, 0.080)
+            J[knee] = (J[hip][0] + s * 0.036, ly(-0.825), -0.004)
+            J[ankle] = (J[hip][0] + s * 0.018, ly(-1.212), -0.046)
+            J[foot] = (J[hip][0] + s * 0.046, ly(-1.212) - 0.068, 0.080)
             J[collar] = (s * 0.072, t(0.068), -0.022)
             J[sh] = (s * (0.172 * sw + 0.15 * (self.girth - 1)), t(0.046), -0.026)
             ua, fa = 0.262 * self.arm_len, 0.243 * self.arm_len
