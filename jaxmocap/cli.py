@@ -169,10 +169,26 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def use_compilation_cache() -> None:
+    """Keep XLA's compiled programs on disk (``$JAXMOCAP_CACHE/xla``, at most 1 GiB, least recently used out), so
+    that a second run skips most compilation (the demo: 49 -> 23 s). ``JAX_COMPILATION_CACHE_DIR`` takes
+    precedence."""
+    import jax
+
+    from smplx_jax.default_model import cache_root
+
+    if jax.config.jax_compilation_cache_dir is None:
+        jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        jax.config.update("jax_compilation_cache_max_size", 1 << 30)
+
+
 def main(argv=None) -> int:
     from smplx_jax import ModelFileError
 
     args = _parser().parse_args(argv)
+    if args.command != "bench":  # benchmarks time first runs, compilation included
+        use_compilation_cache()
     try:
         args.run(args)
     except (InputError, ModelFileError, OSError) as err:

@@ -1,5 +1,6 @@
 """The command line: exit codes, one-line errors, and the files it writes."""
 
+import os
 import subprocess
 import sys
 
@@ -57,3 +58,23 @@ def test_detect_on_missing_input_is_an_error(tmp_path, capsys):
     assert main(["detect", str(tmp_path / "missing.mp4"), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "missing.mp4" in err
+
+
+_CACHED_JIT = """
+import jax, jax.numpy as jnp
+from jaxmocap.cli import use_compilation_cache
+events = []
+jax.monitoring.register_event_listener(lambda name, **kwargs: events.append(name))
+use_compilation_cache()
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)  # cache even this tiny program
+jax.jit(lambda x: jnp.sin(x) * 2)(1.0)
+print("hit" if "/jax/compilation_cache/cache_hits" in events else "miss")
+"""
+
+
+def test_compiled_programs_are_kept_on_disk_for_the_next_run(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"} | {"JAXMOCAP_CACHE": str(tmp_path)}
+    runs = [subprocess.run([sys.executable, "-c", _CACHED_JIT], env=env, capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    assert [r.stdout.strip() for r in runs] == ["miss", "hit"]
+    assert any(f.name.endswith("-cache") for f in (tmp_path / "xla").iterdir())
