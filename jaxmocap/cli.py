@@ -171,7 +171,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def use_compilation_cache() -> None:
     """Keep XLA's compiled programs on disk (``$JAXMOCAP_CACHE/xla``, at most 1 GiB, least recently used out), so
-    that a second run skips most compilation (the demo: 49 -> 23 s). ``JAX_COMPILATION_CACHE_DIR`` takes
+    that a second run skips most compilation (the demo: 50 -> 22 s). ``JAX_COMPILATION_CACHE_DIR`` takes
     precedence."""
     import jax
 
