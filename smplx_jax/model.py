@@ -28,7 +28,7 @@ class BodyModel:
     influential joints, ``I`` the most nonzero skinning weights any vertex of the file has (4 in the default
     model), so that skinning can gather ``I`` transforms per vertex instead of blending all 55. The ``sparse_*``
     arrays hold the few vertices that the vertex joints and face landmarks read, so that `forward_joints`
-    never forms the whole mesh.
+    never forms the whole mesh; those are always skinned by gathering, whatever ``I`` (there are ~170).
     """
 
     template_cm: Float[Array, "3 V"]
