@@ -18,7 +18,7 @@ from params_util import random_params
 import smplx_jax
 from jaxmocap.cli import main
 from jaxmocap.detect.openpose import json_name, write_openpose_json
-from jaxmocap.integrate import copy_paste, fit, ik, smooth_params, smooth_rotvecs, synthetic
+from jaxmocap.integrate import copy_paste, fit, fit_frame, ik, smooth_params, smooth_rotvecs, synthetic
 from jaxmocap.integrate import fitting
 from jaxmocap.integrate.folder import infer_image_size
 from jaxmocap.motion import motion_params, read_motion
@@ -117,23 +117,21 @@ def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit):
 
 
 def test_vmapped_fit_equals_the_fit_of_each_frame_alone(default_model_dir, noisy):
-    """vmap = loop, in float64: in float32 the batched sums round in another order, and LM's accept/reject
+    """vmap = loop, in float64: in float32 the batched sums round in another order, and the fit's accept/reject
     decisions amplify that along weakly determined directions (frames then differ by up to ~1 px and land in
     different, about equally good minima; the batched fit's accuracy is tested above)."""
     frames = np.array([0, 7, 18])
     with jax.enable_x64(True):
         model = smplx_jax.load_model(default_model_dir / "smplx" / "SMPLX_NEUTRAL.npz", dtype=jnp.float64)
-        km = fitting.openpose_keypoint_model(model)
-        f64 = lambda a: jnp.asarray(np.asarray(a)[frames], jnp.float64)  # noqa: E731
-        args = (f64(noisy.keypoints), f64(fitting.full_pose_of(noisy.init)), f64(noisy.init.betas),
-                jnp.ones((3, 3)), jnp.zeros(3, bool))
-        one = functools.partial(fitting._fit_one, km, config=fitting.FitConfig())
-        batched = jax.jit(jax.vmap(one))(*args)
+        keypoints = jnp.asarray(noisy.keypoints[frames], jnp.float64)
+        init = jax.tree.map(lambda a: jnp.asarray(np.asarray(a)[frames], jnp.float64), noisy.init)
+        one = functools.partial(fit_frame, model)
+        batched = jax.jit(jax.vmap(one))(keypoints, init)
         single = jax.jit(one)
         for i in range(len(frames)):
-            alone = single(*(a[i] for a in args))
-            assert int(alone[3]) == fitting.OK
-            for a, b in zip(alone, batched):
+            alone = single(keypoints[i], jax.tree.map(lambda a: a[i], init))
+            assert int(alone.status) == fitting.OK
+            for a, b in zip(jax.tree.leaves(alone), jax.tree.leaves(batched)):
                 np.testing.assert_allclose(a, b[i], rtol=0, atol=1e-8)
 
 

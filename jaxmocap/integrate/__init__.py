@@ -1,26 +1,30 @@
 """Integration of body and hands into one SMPL-X body per frame (FrankMocap section 3.3), batched over frames.
 
-    from jaxmocap.integrate import copy_paste, fit, smooth_params
+    from jaxmocap.integrate import copy_paste, fit, fit_frame, smooth_params
     params = jax.vmap(copy_paste, in_axes=(None, 0, 0, 0, 0, 0))(model, body, lhand, lwrist, rhand, rwrist)
     result = fit(model, keypoints, init=params)        # keypoints (T, 67, 3) OpenPose order, pixels
+    one = fit_frame(model, keypoints[0], init_0)       # one frame: pure, jit/vmap/grad (implicit differentiation)
     smoothed = smooth_params(result.params, result.valid)
 
-Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `solver`
-(Levenberg-Marquardt with an analytic matrix-free Jacobian), `fitting` (2D keypoints -> pose, shape, camera),
-`eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`, `motion` (fits -> motion.npz
-arrays), `folder` (the ``jaxmocap fit`` command), `synthetic` (problems with known answers for tests and benchmarks).
+Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `fitting` (2D keypoints
+-> pose, shape, camera), `least_squares` (one body's robust least squares on `optimistix.least_squares`),
+`descent` (its matrix-free Levenberg-Marquardt parts), `keypoints` (model keypoints with an analytic Jacobian),
+`mat3` (3x3 kernels), `eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`, `motion`
+(fits -> motion.npz arrays), `folder` (the ``jaxmocap fit`` command), `synthetic` (problems with known answers for
+tests and benchmarks).
 """
 
 from jaxmocap.integrate.camera import project, weak_perspective_from_points
 from jaxmocap.integrate.copy_and_paste import copy_paste, wrist_local_rotvecs
 from jaxmocap.integrate.eft import EFTConfig, EFTResult, fine_tune
-from jaxmocap.integrate.fitting import FitConfig, FitResult, default_pose, fit
+from jaxmocap.integrate.fitting import FitConfig, FitResult, default_pose, fit, fit_frame
 from jaxmocap.integrate.inverse_kinematics import body_from_blazepose, hand_into_body, ik
 from jaxmocap.integrate.motion import fitted_motion, reprojection_errors
 from jaxmocap.integrate.smooth import KERNEL, smooth_camera, smooth_linear, smooth_params, smooth_rotvecs
 
 __all__ = [
     "EFTConfig", "EFTResult", "FitConfig", "FitResult", "KERNEL", "body_from_blazepose", "copy_paste", "default_pose",
-    "fine_tune", "fit", "fitted_motion", "hand_into_body", "ik", "project", "reprojection_errors", "smooth_camera",
-    "smooth_linear", "smooth_params", "smooth_rotvecs", "weak_perspective_from_points", "wrist_local_rotvecs",
+    "fine_tune", "fit", "fit_frame", "fitted_motion", "hand_into_body", "ik", "project", "reprojection_errors",
+    "smooth_camera", "smooth_linear", "smooth_params", "smooth_rotvecs", "weak_perspective_from_points",
+    "wrist_local_rotvecs",
 ]

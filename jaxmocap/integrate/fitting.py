@@ -1,12 +1,14 @@
 """Optimization integration: fit SMPL-X (pose, both hands, shape, weak-perspective camera) to 2D keypoints.
 
-    result = fit(model, keypoints)                 # keypoints (T, 67, 3): BODY_25, left hand, right hand; x, y, conf
-    result = fit(model, keypoints, init=params)    # from a regressor / IK / copy-paste result (batched SMPLXParams)
+    result = fit_frame(model, keypoints, init)     # one frame: keypoints (67, 3) BODY_25, left, right hand; x, y, conf
+    result = fit(model, keypoints, init=params)    # (T, 67, 3): vmap of the same fit, padded to fixed batch sizes
 
-Each frame is an independent robust least-squares problem (`solver.solve`, Levenberg-Marquardt with an analytic
-matrix-free Jacobian), vmapped over frames and jitted once per padded batch size (`BUCKETS`; larger inputs run
-in chunks of the largest). Residuals: confidence-weighted Cauchy-robust reprojection of the 67 keypoints, a prior
-that keeps each joint near the initial pose (weaker for hands), shape L2 and elbow/knee bending limits.
+Each frame is a robust least-squares problem solved by `optimistix.least_squares` (`least_squares.solve`):
+confidence-weighted Cauchy-robust reprojection of the 67 keypoints, a prior that keeps each joint near the initial
+pose (weaker for hands), shape L2 and elbow/knee bending limits. `fit_frame` is pure: it works under `jax.jit`,
+`jax.vmap` and `jax.grad`; gradients of the fitted parameters with respect to the keypoints, their confidences,
+the start and the camera come from implicit differentiation. `fit` jits it once per padded batch size
+(`BUCKETS`; longer inputs run in chunks of the largest) and spreads the frames over all devices.
 """
 
 from __future__ import annotations
@@ -18,11 +20,13 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 from jaxtyping import Array, Float, Int
 
-from jaxmocap.integrate import solver
-from jaxmocap.sharding import shard_frames
+from jaxmocap.integrate import least_squares
 from jaxmocap.integrate.camera import weak_perspective_from_points
+from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, keypoints_cm, params_of
+from jaxmocap.sharding import shard_frames
 from smplx_jax import BodyModel, SMPLXParams, constants
 
 BUCKETS = (1, 8, 32, 64)  # padded batch sizes; longer inputs run in chunks of 64 (faster here than 1024: cache)
@@ -30,36 +34,29 @@ MIN_KEYPOINTS = 3  # fewer visible keypoints: the frame has no person to fit
 
 OK, NO_KEYPOINTS, FAILED = 0, 1, 2  # FitResult.status
 
-FitConfig = solver.SolverConfig
+FitConfig = least_squares.SolverConfig
 
 
 class FitResult(NamedTuple):
-    """Per-frame fit (leading axis T). ``status``: 0 fitted, 1 too few keypoints, 2 numerical failure; frames
-    with a non-zero status hold the initial parameters and camera."""
+    """A fit: one frame from `fit_frame`, a leading axis T from `fit`. ``status``: 0 fitted, 1 too few
+    keypoints, 2 numerical failure; frames with a non-zero status hold the initial parameters and camera."""
 
     params: SMPLXParams
-    camera_scale: Float[Array, "T"]
-    camera_trans: Float[Array, "T 2"]
-    status: Int[Array, "T"]
-    reprojection_error_px: Float[Array, "T"]  # mean pixel distance over keypoints with confidence > 0 (0 if none)
-    initial_reprojection_error_px: Float[Array, "T"]
-    accepted_steps: Int[Array, "T"]
+    camera_scale: Float[Array, "*T"]
+    camera_trans: Float[Array, "*T 2"]
+    status: Int[Array, "*T"]
+    reprojection_error_px: Float[Array, "*T"]  # mean pixel distance over keypoints with confidence > 0 (0 if none)
+    initial_reprojection_error_px: Float[Array, "*T"]
+    accepted_steps: Int[Array, "*T"]
 
     @property
     def valid(self):
         return self.status == OK
 
 
-_KEYPOINT_MODELS: dict[int, tuple[BodyModel, solver.KeypointModel]] = {}
-
-
-def openpose_keypoint_model(model: BodyModel) -> solver.KeypointModel:
-    """The fit's constants for the 67 OpenPose keypoints (cached per model object)."""
-    hit = _KEYPOINT_MODELS.get(id(model))
-    if hit is None or hit[0] is not model:
-        hit = (model, solver.keypoint_model(model, constants.OPENPOSE67_FROM_SMPLX))
-        _KEYPOINT_MODELS[id(model)] = hit
-    return hit[1]
+def openpose_keypoint_model(model: BodyModel) -> KeypointModel:
+    """The fit's constants for the 67 OpenPose keypoints."""
+    return keypoint_model(model, constants.OPENPOSE67_FROM_SMPLX)
 
 
 def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
@@ -72,51 +69,67 @@ def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
     return jnp.asarray(theta, dtype)
 
 
-def _prior_weights(config: FitConfig) -> np.ndarray:
-    prior = np.zeros(55, np.float32)
+def prior_weights(config: FitConfig) -> np.ndarray:
+    """Per joint (55,), metres per radian. Jaw and eyes, which no keypoint sees, stay where they start."""
+    prior = np.full(55, config.prior_body, np.float32)
     prior[0] = config.prior_global
-    prior[1:22] = config.prior_body
     prior[25:55] = config.prior_hand
     return prior
 
 
-FREE_JOINTS = tuple(j not in (22, 23, 24) for j in range(55))  # jaw and eyes are not seen by 67 keypoints
-
-
-def _fit_one(km, keypoints, theta, betas, cam, has_cam, config: FitConfig):
+def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, config: FitConfig) -> FitResult:
+    """One frame from its full pose ``(55, 3)``; ``camera`` (3,) or None (fitted to the start)."""
+    dtype = pose.dtype
     finite = jnp.all(jnp.isfinite(keypoints), axis=-1)
     conf = jnp.where(finite & (keypoints[:, 2] > 0), keypoints[:, 2], 0.0)
     target = jnp.where(finite[:, None], keypoints[:, :2], 0.0)
     seen = conf > 0
-    x0 = solver.model_keypoints(km, theta, betas)
-    s_guess, t_guess = weak_perspective_from_points(x0[:, :2], target, conf)
-    cam = jnp.where(has_cam, cam, jnp.concatenate([s_guess[None], t_guess]))
-    sref = jnp.where(jnp.isfinite(cam[0]) & (cam[0] > 0), cam[0], 1.0)
-    problem = solver.Problem(target, conf, theta, jnp.asarray(_prior_weights(config)), sref)
-    out = solver.solve(km, problem, theta, betas, cam, FREE_JOINTS, True, True, config)
+    if camera is None:
+        scale, trans = weak_perspective_from_points(keypoints_cm(km, pose, betas)[:2].T, target, conf)
+        camera = jnp.concatenate([scale[None], trans])
+    sref = jnp.where(jnp.isfinite(camera[0]) & (camera[0] > 0), camera[0], 1.0)
+    problem = least_squares.Problem(km, target, conf, pose, betas, jnp.asarray(prior_weights(config), dtype), sref,
+                                    jnp.ones(55, dtype), jnp.ones((), dtype))
+    start = least_squares.Unknowns(pose, betas, jnp.concatenate([jnp.log(sref)[None], camera[1:]]))
+    solution = least_squares.solve(problem, start, config)
+    out = solution.value
 
-    def reproj(theta, betas, cam):
-        x = solver.model_keypoints(km, theta, betas)
-        err = jnp.linalg.norm(cam[0] * x[:, :2] + cam[1:] - target, axis=-1)
+    def reprojection_error(pose, betas, scale, trans):
+        err = jnp.linalg.norm(scale * keypoints_cm(km, pose, betas)[:2].T + trans - target, axis=-1)
         return jnp.sum(jnp.where(seen, err, 0.0)) / jnp.maximum(jnp.sum(seen), 1)
 
-    err0 = reproj(theta, betas, cam)
-    err = reproj(out.theta, out.betas, out.cam)
+    scale = jnp.exp(out.camera[0])
+    err0 = reprojection_error(pose, betas, camera[0], camera[1:])
+    err = reprojection_error(out.pose_rotvecs, out.betas, scale, out.camera[1:])
     enough = jnp.sum(seen) >= MIN_KEYPOINTS
-    finite_out = (jnp.all(jnp.isfinite(out.theta)) & jnp.all(jnp.isfinite(out.betas)) & jnp.all(jnp.isfinite(out.cam))
-                  & jnp.isfinite(err))
-    status = jnp.where(~enough, NO_KEYPOINTS, jnp.where(finite_out, OK, FAILED)).astype(jnp.int32)
+    solved = ((solution.result == optx.RESULTS.successful)
+              | (solution.result == optx.RESULTS.nonlinear_max_steps_reached))
+    finite_out = jnp.all(jnp.array([jnp.all(jnp.isfinite(a)) for a in jax.tree.leaves(out)])) & jnp.isfinite(err)
+    status = jnp.where(~enough, NO_KEYPOINTS, jnp.where(solved & finite_out, OK, FAILED)).astype(jnp.int32)
     keep = status == OK
-    pick = lambda a, b: jnp.where(keep, a, b)  # noqa: E731
+    pick = functools.partial(jnp.where, keep)
     err0 = jnp.where(enough & jnp.isfinite(err0), err0, 0.0)
-    return (pick(out.theta, theta), pick(out.betas, betas), pick(out.cam, cam), status, pick(err, err0), err0,
-            jnp.where(keep, out.accepted, 0))
+    params = params_of(pick(out.pose_rotvecs, pose), pick(out.betas, betas), km.body.num_expression)
+    return FitResult(params, pick(scale, camera[0]), pick(out.camera[1:], camera[1:]), status, pick(err, err0), err0,
+                     jnp.where(keep, solution.state.num_accepted_steps - 1, 0))
+
+
+def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXParams, *,
+              camera: Float[Array, "3"] | None = None, iterations: int = 20,
+              config: FitConfig | None = None) -> FitResult:
+    """Fit one frame's ``keypoints (67, 3)`` (pixels; confidence 0 or NaN/inf = missing) from ``init`` (one
+    body; hand poses absolute; ``transl`` and ``expression`` ignored, the result has zeros). ``camera``:
+    ``(scale, tx, ty)`` to start from, or None to fit it to the start's keypoints. Pure and differentiable
+    (implicit differentiation; an unseen keypoint's gradient is zero)."""
+    config = dataclasses.replace(config or FitConfig(), iterations=iterations)
+    km = openpose_keypoint_model(model)
+    return _fit_one(km, keypoints, init.full_pose(), init.betas, camera, config)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def _fit_batch(km, keypoints, theta, betas, cam, has_cam, config: FitConfig):
-    return jax.vmap(functools.partial(_fit_one, config=config), in_axes=(None, 0, 0, 0, 0, 0))(
-        km, keypoints, theta, betas, cam, has_cam)
+def _fit_batch(km, keypoints, pose, betas, camera, config: FitConfig):
+    one = functools.partial(_fit_one, config=config)
+    return jax.vmap(one, in_axes=(None, 0, 0, 0, None if camera is None else 0))(km, keypoints, pose, betas, camera)
 
 
 def bucket_size(n: int) -> int:
@@ -127,8 +140,8 @@ def full_pose_of(params: SMPLXParams) -> Float[Array, "T 55 3"]:
     return jax.vmap(SMPLXParams.full_pose)(params)
 
 
-def params_from_full_pose(theta, betas, num_expression: int) -> SMPLXParams:
-    return jax.vmap(lambda t, b: solver.params_of(t, b, num_expression))(theta, betas)
+def params_from_full_pose(pose, betas, num_expression: int) -> SMPLXParams:
+    return jax.vmap(lambda p, b: params_of(p, b, num_expression))(pose, betas)
 
 
 def _check(name, value, shape, dtype):
@@ -144,9 +157,8 @@ def _check(name, value, shape, dtype):
 
 def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_scale=None, camera_trans=None, *,
         iterations: int = 20, config: FitConfig | None = None, progress=None) -> FitResult:
-    """Fit every frame of ``keypoints (T, 67, 3)`` (pixels; confidence 0 = missing; NaN/inf keypoints are treated
-    as missing). ``init``: batched `SMPLXParams` (T leading; hand poses absolute; ``transl`` ignored, fits use 0);
-    default `default_pose` with mean shape. Camera: given, or fitted to the initial pose's keypoints.
+    """Fit every frame of ``keypoints (T, 67, 3)`` (`fit_frame` vmapped). ``init``: batched `SMPLXParams` (T
+    leading), default `default_pose` with mean shape. Camera: given (both arrays), or fitted to the start.
     ``progress(n)`` is called after each chunk with the number of frames done. Runs in the model's precision
     (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64)."""
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
@@ -157,17 +169,15 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
     t = keypoints.shape[0]
     nb = model.num_betas
     if init is None:
-        theta = np.broadcast_to(np.asarray(default_pose(dtype)), (t, 55, 3))
+        pose = np.broadcast_to(np.asarray(default_pose(dtype)), (t, 55, 3))
         betas = np.zeros((t, nb), dtype)
     else:
-        theta = _check("init pose", full_pose_of(init), (t, 55, 3), dtype)
+        pose = _check("init pose", full_pose_of(init), (t, 55, 3), dtype)
         betas = _check("init betas", init.betas, (t, nb), dtype)
-    has_cam = camera_scale is not None
-    if has_cam:
-        cam = np.concatenate([_check("camera_scale", camera_scale, (t,), dtype)[:, None],
-                              _check("camera_trans", camera_trans, (t, 2), dtype)], axis=1)
-    else:
-        cam = np.ones((t, 3), dtype)
+    camera = None
+    if camera_scale is not None:
+        camera = np.concatenate([_check("camera_scale", camera_scale, (t,), dtype)[:, None],
+                                 _check("camera_trans", camera_trans, (t, 2), dtype)], axis=1)
     km = openpose_keypoint_model(model)
     outs = []
     for start in range(0, t, BUCKETS[-1]):
@@ -177,15 +187,12 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
         pad = lambda a: np.concatenate([a[start:stop], np.repeat(a[start:start + 1], size - n, 0)])  # noqa: E731
         kp = pad(keypoints)
         kp[n:] = 0.0  # padding frames have no keypoints
-        frames = shard_frames((kp, pad(theta), pad(betas), pad(cam), np.full((size,), has_cam)), size)
+        frames = shard_frames((kp, pad(pose), pad(betas), None if camera is None else pad(camera)), size)
         out = _fit_batch(km, *frames, config)
-        outs.append([np.asarray(o)[:n] for o in out])
+        outs.append(jax.tree.map(lambda a: np.asarray(a)[:n], out))
         if progress is not None:
             progress(n)
-    theta, betas, cam, status, err, err0, acc = (np.concatenate(parts) for parts in zip(*outs))
-    params = params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression)
-    return FitResult(params, jnp.asarray(cam[:, 0]), jnp.asarray(cam[:, 1:]), jnp.asarray(status), jnp.asarray(err),
-                     jnp.asarray(err0), jnp.asarray(acc))
+    return jax.tree.map(lambda *parts: jnp.asarray(np.concatenate(parts)), *outs)
 
 
-__all__ = ["BUCKETS", "FitConfig", "FitResult", "default_pose", "fit", "openpose_keypoint_model"]
+__all__ = ["BUCKETS", "FitConfig", "FitResult", "default_pose", "fit", "fit_frame", "openpose_keypoint_model"]

@@ -2,7 +2,8 @@
 
 Targets are metric 3D points in image-aligned axes (x right, y down, z away from the camera): mediapipe's
 BlazePose world landmarks (metres about the hips) and each hand's 21 world landmarks, or any 3D joints. The
-solver (`solver.solve` with D = 3) fits joint rotations together with a free scale and offset per target set, so
+least-squares solver of the 2D fit (`least_squares.solve` with D = 3) fits joint rotations together with a free
+scale and offset per target set, so
 the residuals are scale- and offset-free: BlazePose's hip centre is not SMPL-X's pelvis and its skeleton is not
 ours; what is fitted is the shape of the point set, i.e. bone directions. Hands are fitted after the body with
 the body fixed: the wrist's local rotation and the 15 finger joints of that side (the hand's own scale and offset
@@ -17,8 +18,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxmocap.integrate import solver
+from jaxmocap.integrate import least_squares
 from jaxmocap.integrate.fitting import default_pose
+from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
 from smplx_jax import BodyModel, constants
 
 # BlazePose landmark -> SMPL-X output joint (127-joint index); eyes/ears/heels/toes are vertex joints.
@@ -32,34 +34,27 @@ BODY_IK_JOINTS = tuple(j <= 21 and j not in (20, 21) for j in range(55))  # glob
 LEFT_HAND_IK_JOINTS = tuple(j == 20 or 25 <= j < 40 for j in range(55))
 RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
 
-IKConfig = functools.partial(solver.SolverConfig, iterations=20, cg_iterations=30, prior_global=1e-4, prior_body=2e-3,
-                             prior_hand=5e-4, robust_scale=0.2)
-
-_KM: dict = {}
-
-
-def _keypoint_model(model: BodyModel, index: tuple[int, ...]) -> solver.KeypointModel:
-    key = (id(model), index)
-    hit = _KM.get(key)
-    if hit is None or hit[0] is not model:
-        hit = (model, solver.keypoint_model(model, index))
-        _KM[key] = hit
-    return hit[1]
+IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, cg_iterations=30, prior_global=1e-4,
+                             prior_body=2e-3, prior_hand=5e-4, robust_scale=0.2)
 
 
 def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     finite = jnp.all(jnp.isfinite(targets), -1)
     conf = jnp.where(finite & (conf > 0), conf, 0.0)
     targets = jnp.where(finite[:, None], targets, 0.0)
-    x0 = solver.model_keypoints(km, theta, betas)
     w = conf / jnp.maximum(jnp.sum(conf), 1e-12)
-    cam = jnp.concatenate([jnp.ones(1, theta.dtype), jnp.sum(w[:, None] * (targets - x0), 0)])
+    offset = jnp.sum(w[:, None] * (targets - keypoints_cm(km, theta, betas).T), 0)
     prior = np.where(np.arange(55) == 0, config.prior_global,
                      np.where(np.arange(55) <= 21, config.prior_body, config.prior_hand)).astype(np.float32)
-    problem = solver.Problem(targets, conf, theta, jnp.asarray(prior), jnp.asarray(1.0, theta.dtype))
-    out = solver.solve(km, problem, theta, betas, cam, free_joints, fit_betas, True, config)
-    ok = (jnp.sum(conf > 0) >= 3) & jnp.all(jnp.isfinite(out.theta)) & jnp.all(jnp.isfinite(out.cam))
-    return jnp.where(ok, out.theta, theta), jnp.where(ok, out.betas, betas), jnp.where(ok, out.cam, cam), ok
+    problem = least_squares.Problem(km, targets, conf, theta, betas, jnp.asarray(prior), jnp.ones((), theta.dtype),
+                                    free_joints, fit_betas)
+    start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))
+    out = least_squares.solve(problem, start, config).value
+    pose, betas_out = least_squares.pose_and_shape(out, problem)
+    cam = jnp.concatenate([jnp.exp(out.camera[:1]), out.camera[1:]])
+    ok = (jnp.sum(conf > 0) >= 3) & jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(cam))
+    return (jnp.where(ok, pose, theta), jnp.where(ok, betas_out, betas),
+            jnp.where(ok, cam, jnp.concatenate([jnp.ones(1, theta.dtype), offset])), ok)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
@@ -70,11 +65,11 @@ def _ik_batch(km, targets, conf, theta, betas, free_joints, fit_betas, config):
 
 
 def ik(model: BodyModel, index, targets, conf, theta, betas, free_joints, *, fit_betas: bool = False,
-       config: solver.SolverConfig | None = None):
+       config: least_squares.SolverConfig | None = None):
     """Fit ``theta (T, 55, 3)`` (joints ``free_joints`` free) and optionally ``betas`` so that the model's joints
     ``index`` (into the 127) match ``targets (T, K, 3)`` up to a scale and an offset. Returns
     ``(theta, betas, cam (T, 4) = scale, offset, ok (T,))``; non-finite targets count as missing."""
-    km = _keypoint_model(model, tuple(int(i) for i in index))
+    km = keypoint_model(model, index)
     return _ik_batch(km, jnp.asarray(targets, jnp.float32), jnp.asarray(conf, jnp.float32),
                      jnp.asarray(theta, jnp.float32), jnp.asarray(betas, jnp.float32),
                      jnp.asarray(free_joints, jnp.float32), jnp.float32(fit_betas), config or IKConfig())

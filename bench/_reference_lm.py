@@ -1,4 +1,7 @@
-"""Levenberg-Marquardt on the body model with an analytic, matrix-free Jacobian (one body; batch with `jax.vmap`).
+"""The hand-written Levenberg-Marquardt fit that `jaxmocap.integrate` used before its optimistix solver, kept for
+the side-by-side comparison in ``bench/fit.py`` (``fit_reference``).
+
+Levenberg-Marquardt on the body model with an analytic, matrix-free Jacobian (one body; batch with `jax.vmap`).
 
 Unknowns of one body: the 55 joint axis-angles ``theta`` (a static mask says which are free), ``betas`` and a
 similarity camera ``cam = (scale, t_1..t_D)`` mapping model points ``x`` to data ``scale * x[:D] + t`` (D = 2:
@@ -402,3 +405,28 @@ def solve(km: KeypointModel, problem: Problem, theta, betas, cam, free_joints: F
             jnp.asarray(0, jnp.int32))
     theta_cm, betas, cam, _, cost, _, _, accepted = jax.lax.fori_loop(0, config.iterations, lm, init)
     return Result(theta_cm.T, betas, cam, cost, cost0, accepted)
+
+
+def _fit_one(km, keypoints, theta, betas, cam, config: SolverConfig):
+    from jaxmocap.integrate.fitting import prior_weights
+    finite = jnp.all(jnp.isfinite(keypoints), axis=-1)
+    conf = jnp.where(finite & (keypoints[:, 2] > 0), keypoints[:, 2], 0.0)
+    target = jnp.where(finite[:, None], keypoints[:, :2], 0.0)
+    prior = jnp.asarray(prior_weights(config)).at[22:25].set(0.0)
+    problem = Problem(target, conf, theta, prior, cam[0])
+    free = tuple(j not in (22, 23, 24) for j in range(55))
+    out = solve(km, problem, theta, betas, cam, free, True, True, config)
+    return out.theta, out.betas, out.cam
+
+
+_fit_batch = jax.jit(jax.vmap(_fit_one, in_axes=(None, 0, 0, 0, 0, None)), static_argnums=5)
+
+
+def fit_reference(model, keypoints, theta, betas, cam, config: SolverConfig):
+    """The old `fit` on given cameras: (theta (T, 55, 3), betas, cam (T, 3)) in chunks of 64 frames."""
+    km = keypoint_model(model, smplx_jax.constants.OPENPOSE67_FROM_SMPLX)
+    outs = []
+    for start in range(0, keypoints.shape[0], 64):
+        s = slice(start, start + 64)
+        outs.append(_fit_batch(km, keypoints[s], theta[s], betas[s], cam[s], config))
+    return [np.concatenate([np.asarray(o[i]) for o in outs]) for i in range(3)]

@@ -1,0 +1,267 @@
+"""One body's robust, regularised least squares, solved by `optimistix.least_squares` (`solve`).
+
+Unknowns (`Unknowns`): the 55 joint axis-angles, ``betas`` and a similarity camera ``(log scale, t_1..t_D)``
+mapping model points ``x`` to data ``scale * x[:D] + t`` (D = 2: weak perspective to pixels, the 2D fit; D = 3:
+metric 3D landmarks up to scale and offset, IK). `Problem` says which joints (and whether the shape) are free.
+
+Residuals (`residuals`; half their sum of squares is the cost):
+
+* data: ``sqrt(conf) * r * sqrt(log1p(u) / u)`` per keypoint, ``r`` its error and ``u = |r|^2 / sigma^2``, whose
+  square is Cauchy's robust ``conf * sigma^2 * log1p(u)``; ``sigma = robust_scale * scale_ref``;
+* priors, in metres times ``scale_ref`` (the initial camera scale, pixels or data units per metre): each joint
+  near its start ``prior[j] * (theta_j - theta0_j)``, shape ``prior_betas * betas``, and one-sided bending limits
+  of elbows and knees ``prior_bend * relu(sign * theta[j, axis])``.
+
+The solver (`GaussNewtonCG`) is optimistix's Gauss-Newton iteration with a Levenberg-Marquardt descent that never
+forms the Jacobian (`descent.DampedNewtonCG`) on the IRLS model of the cost (`IRLSModel`: the analytic Jacobian
+of `keypoints`, CG preconditioned by the 3x3 block of each joint, the shape diagonal and the camera block), and
+Marquardt's damping rule (`descent.DampingSearch`). Gradients through `solve` come from implicit
+differentiation (`optimistix.ImplicitAdjoint`) of the cost's optimality condition, through the exact JVP of
+`keypoints.keypoints_cm`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from jaxmocap.integrate import mat3
+from jaxmocap.integrate.descent import DampedNewtonCG, DampingSearch
+from jaxmocap.integrate import keypoints
+from jaxmocap.integrate.keypoints import KeypointModel, Linearization
+
+# One-sided bending limits (SMPLify-X's angle prior): (joint, axis component, sign): sign * theta[joint, axis] > 0
+# is hyper-extension. Elbows bend about y (left negative, right positive), knees about x (positive).
+BEND_LIMITS = ((18, 1, 1.0), (19, 1, -1.0), (4, 0, -1.0), (5, 0, -1.0))
+_BEND_JOINT, _BEND_AXIS, _BEND_SIGN = (list(c) for c in zip(*BEND_LIMITS))  # lists: no cached constant dtypes
+
+
+def _bend(pose):
+    """``sign * theta[joint, axis]`` of each bending limit: positive is hyper-extension."""
+    return jnp.asarray(_BEND_SIGN, pose.dtype) * pose[_BEND_JOINT, _BEND_AXIS]
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverConfig:
+    """Static settings of one solve (hashable: a change recompiles)."""
+
+    iterations: int = 20  # trial steps (each evaluates the model once and solves one damped system)
+    cg_iterations: int = 8
+    robust_scale: float = 0.1  # metres (times the camera scale for pixels)
+    prior_global: float = 1e-3  # metres per radian
+    prior_body: float = 0.02
+    prior_hand: float = 0.005
+    prior_betas: float = 0.005  # metres per unit of beta
+    prior_bend: float = 0.2
+    initial_damping: float = 1e-3  # Marquardt's mu at the start (relative to the diagonal of J^T J)
+
+
+class Unknowns(NamedTuple):
+    pose_rotvecs: Float[Array, "55 3"]
+    betas: Float[Array, "B"]
+    camera: Float[Array, "C"]  # log scale, then the D translations
+
+
+class Problem(NamedTuple):
+    """Data, prior and free set of one body (all arrays: one compiled solver serves different free sets)."""
+
+    km: KeypointModel
+    target: Float[Array, "K D"]
+    conf: Float[Array, "K"]  # 0 = missing
+    pose0: Float[Array, "55 3"]  # prior centre, and the pose of joints that are not free
+    betas0: Float[Array, "B"]  # the shape when it is not free
+    prior: Float[Array, "55"]  # prior weight per joint, metres per radian
+    scale_ref: Float[Array, ""]  # pixels (or data units) per metre
+    free: Float[Array, "55"]  # 1 = joint free
+    fit_betas: Float[Array, ""]  # 1 = shape free
+
+
+class Residuals(NamedTuple):
+    data: Float[Array, "D K"]
+    pose: Float[Array, "55 3"]
+    betas: Float[Array, "B"]
+    bend: Float[Array, "4"]
+
+
+def _log1p_ratio(u):
+    """``log1p(u) / u``, smooth at zero."""
+    small = u < 1e-3
+    us = jnp.where(small, 1.0, u)
+    return jnp.where(small, 1.0 - u / 2 + u * u / 3 - u**3 / 4, jnp.log1p(us) / us)
+
+
+@jax.custom_jvp
+def _sqrt_weight(conf):
+    """``sqrt(conf)`` whose derivative is zero at zero (an unseen keypoint contributes nothing, to any order)."""
+    return jnp.sqrt(conf)
+
+
+@_sqrt_weight.defjvp
+def _sqrt_weight_jvp(primals, tangents):
+    (conf,), (dconf,) = primals, tangents
+    root = jnp.sqrt(conf)
+    return root, jnp.where(conf > 0, 0.5 / jnp.where(conf > 0, root, 1.0), 0.0) * dconf
+
+
+def pose_and_shape(y: Unknowns, problem: Problem):
+    pose = jnp.where(problem.free[:, None] > 0, y.pose_rotvecs, problem.pose0)
+    return pose, jnp.where(problem.fit_betas > 0, y.betas, problem.betas0)
+
+
+def _errors(x, camera, target):
+    d = target.shape[1]
+    return jnp.exp(camera[0]) * x[:d] + camera[1:, None] - target.T  # (D, K)
+
+
+def _cauchy_u(r, problem: Problem, config: SolverConfig):
+    """``u = |r|^2 / sigma^2`` per keypoint, ``sigma = robust_scale * scale_ref``."""
+    return jnp.sum(r * r, 0) / (config.robust_scale * problem.scale_ref) ** 2
+
+
+def residuals(y: Unknowns, problem: Problem, config: SolverConfig) -> Residuals:
+    """The residuals whose half sum of squares is the cost (the function optimistix minimises)."""
+    pose, betas = pose_and_shape(y, problem)
+    r = _errors(keypoints.keypoints_cm(problem.km, pose, betas), y.camera, problem.target)
+    sref = problem.scale_ref
+    return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(_cauchy_u(r, problem, config))),
+                     sref * problem.prior[:, None] * (pose - problem.pose0), sref * config.prior_betas * betas,
+                     sref * config.prior_bend * jax.nn.relu(_bend(pose)))
+
+
+class Blocks(NamedTuple):
+    """A block diagonal of the model Hessian (the preconditioner of `descent.DampedNewtonCG`)."""
+
+    pose: Float[Array, "3 3 55"]
+    betas: Float[Array, "B"]
+    camera: Float[Array, "C C"]
+
+    def diagonal(self) -> Unknowns:
+        return Unknowns(jnp.stack([self.pose[i, i] for i in range(3)], 1), self.betas, jnp.diagonal(self.camera))
+
+    def damped_inverse(self, shift: Unknowns) -> "Blocks":
+        """The blocks of ``(blocks + diag(shift))^-1``."""
+        eye = jnp.eye(3, dtype=self.betas.dtype)[:, :, None]
+        camera = self.camera + jnp.diag(shift.camera)
+        camera = mat3.inverse(camera[:, :, None])[:, :, 0] if camera.shape[0] == 3 else jnp.linalg.inv(camera)
+        return Blocks(mat3.inverse(self.pose + shift.pose_rotvecs.T[:, None, :] * eye),
+                      1.0 / (self.betas + shift.betas), camera)
+
+    def mv(self, v: Unknowns) -> Unknowns:
+        return Unknowns(mat3.matvec(self.pose, v.pose_rotvecs.T).T, self.betas * v.betas, self.camera @ v.camera)
+
+
+def _data_blocks(lin: Linearization, scale, w, d: int, km: KeypointModel):
+    """Diagonal blocks of ``J^T diag(w) J`` of the data term: 3x3 per joint (from moments of the keypoints about
+    it: one GEMM with ``reach ** 2``), the shape diagonal and the camera block (log scale, translation)."""
+    x, p = lin.x, lin.p
+    nk = w.shape[0]
+    xx = (x[:, None, :] * x[None, :, :]).reshape(9, nk)
+    mom = jnp.concatenate([w[None], w * x, w * xx]) @ km.reach2  # (13, 55)
+    m0, m1, m2 = mom[0], mom[1:4], mom[4:].reshape(3, 3, 55)
+    m1p = m1[:, None, :] * p[None, :, :]
+    q = m2 - m1p - jnp.swapaxes(m1p, 0, 1) + m0 * (p[:, None, :] * p[None, :, :])  # sum w v v^T, v = x - p
+    if d == 2:  # [v]x^T P^T P [v]x with P the projection to x, y
+        z = jnp.zeros_like(m0)
+        b_omega = jnp.stack([jnp.stack([q[2, 2], z, -q[0, 2]]), jnp.stack([z, q[2, 2], -q[1, 2]]),
+                             jnp.stack([-q[0, 2], -q[1, 2], q[0, 0] + q[1, 1]])])
+    else:
+        b_omega = (q[0, 0] + q[1, 1] + q[2, 2]) * jnp.eye(3, dtype=x.dtype)[:, :, None] - q
+    b_pose = (scale * scale) * mat3.matmul(jnp.swapaxes(lin.a, 0, 1), mat3.matmul(b_omega, lin.a))
+    jb = lin.jb[:, : d * nk]
+    b_betas = (scale * scale) * ((jb * jb) @ jnp.tile(w, d))
+    xd = scale * x[:d]
+    cross = jnp.sum(w * xd, 1)
+    b_camera = jnp.concatenate([jnp.concatenate([jnp.sum(w * xd * xd)[None], cross])[None],
+                                jnp.concatenate([cross[:, None], jnp.sum(w) * jnp.eye(d, dtype=x.dtype)], 1)])
+    return b_pose, b_betas, b_camera
+
+
+def _prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Unknowns]:
+    """The gradient and the (Gauss-Newton, diagonal) Hessian of the priors' half sum of squares."""
+    sref = problem.scale_ref
+    pose_weight = jnp.broadcast_to((sref * problem.prior[:, None]) ** 2, pose.shape)
+    bend_weight, bend = (sref * config.prior_bend) ** 2, _bend(pose)
+    gradient = (pose_weight * (pose - problem.pose0)).at[_BEND_JOINT, _BEND_AXIS].add(
+        bend_weight * jax.nn.relu(bend) * jnp.asarray(_BEND_SIGN, pose.dtype))
+    hessian = pose_weight.at[_BEND_JOINT, _BEND_AXIS].add(bend_weight * (bend > 0))
+    betas_weight = jnp.full_like(betas, (sref * config.prior_betas) ** 2)
+    return (Unknowns(gradient, betas_weight * betas, jnp.zeros_like(camera)),
+            Unknowns(hessian, betas_weight, jnp.zeros_like(camera)))
+
+
+class IRLSModel(eqx.Module):
+    """The descent's local model of the cost at ``y`` (`descent.DampedNewtonCG`): the keypoint errors weighted
+    by Cauchy's ``rho' = conf / (1 + u)`` held at ``y`` (IRLS), with the analytic Jacobian of the keypoints
+    (one `keypoints.linearize`), and the priors. Returns the cost's exact gradient, ``v -> H v`` (IRLS
+    Gauss-Newton, with the millimetre terms of the keypoint Jacobian left out: cheaper, still positive
+    semi-definite) and the block diagonal of ``H``, all masked to the free unknowns."""
+
+    problem: Problem
+    config: SolverConfig = eqx.field(static=True)
+
+    def __call__(self, y: Unknowns):
+        problem, config = jax.lax.stop_gradient(self.problem), self.config
+        km, d = problem.km, problem.target.shape[1]
+        pose, betas = pose_and_shape(y, problem)
+        lin = keypoints.linearize(km, pose, betas)
+        scale = jnp.exp(y.camera[0])
+        r = _errors(lin.x, y.camera, problem.target)
+        w = problem.conf / (1.0 + _cauchy_u(r, problem, config))
+        mask = Unknowns(jnp.broadcast_to(problem.free[:, None], pose.shape),
+                        jnp.broadcast_to(problem.fit_betas, betas.shape), jnp.ones_like(y.camera))
+        prior_gradient, prior_hessian = _prior_quadratic(pose, betas, y.camera, problem, config)
+
+        def jv(v: Unknowns, exact: bool):  # (D, K)
+            dx = keypoints.jvp(km, lin, v.pose_rotvecs * mask.pose_rotvecs, v.betas * mask.betas, exact=exact)
+            return scale * dx[:d] + (scale * v.camera[0]) * lin.x[:d] + v.camera[1:, None]
+
+        def jtu(u, exact: bool) -> Unknowns:
+            padded = jnp.concatenate([scale * u, jnp.zeros((3 - d,) + u.shape[1:], u.dtype)])
+            dpose, dbetas = keypoints.vjp(km, lin, padded, exact=exact)
+            return Unknowns(dpose, dbetas, jnp.concatenate([(scale * jnp.sum(u * lin.x[:d]))[None], jnp.sum(u, 1)]))
+
+        def hessian(v: Unknowns) -> Unknowns:
+            return jax.tree.map(lambda a, h, vi, m: (a + h * vi) * m, jtu(w * jv(v, False), False), prior_hessian,
+                                v, mask)
+
+        gradient = jax.tree.map(lambda a, g, m: (a + g) * m, jtu(w * r, True), prior_gradient, mask)
+        b_pose, b_betas, b_camera = _data_blocks(lin, scale, w, d, km)
+        eye = jnp.eye(3, dtype=r.dtype)[:, :, None]
+        blocks = Blocks(jnp.where(problem.free > 0, b_pose + prior_hessian.pose_rotvecs.T[:, None, :] * eye, eye),
+                        jnp.where(problem.fit_betas > 0, b_betas + prior_hessian.betas, 1.0), b_camera)
+        return gradient, hessian, blocks
+
+
+def _quiet(**_):
+    pass
+
+
+class GaussNewtonCG(optx.AbstractGaussNewton):
+    """Levenberg-Marquardt on a local model with a matrix-free descent (`descent.DampedNewtonCG`)."""
+
+    rtol: float
+    atol: float
+    norm: Callable
+    descent: DampedNewtonCG
+    search: DampingSearch
+    verbose: Callable
+
+
+def solve(problem: Problem, y0: Unknowns, config: SolverConfig) -> optx.Solution:
+    """Minimise the cost of `residuals` from ``y0`` (``config.iterations`` trial steps, fewer once steps and
+    cost stall at rounding level; ``result`` is successful or ``nonlinear_max_steps_reached``, both fine; no
+    exception under `jax.vmap`)."""
+    tolerance = 16 * float(jnp.finfo(y0.pose_rotvecs.dtype).eps)
+    solver = GaussNewtonCG(rtol=tolerance, atol=tolerance, norm=optx.max_norm,
+                           descent=DampedNewtonCG(IRLSModel(problem, config), config.initial_damping,
+                                                  config.cg_iterations),
+                           search=DampingSearch(), verbose=_quiet)
+    return optx.least_squares(jax.tree_util.Partial(residuals, config=config), solver, y0, problem,
+                              max_steps=config.iterations + 1, throw=False)
