@@ -69,7 +69,7 @@ class DampingSearch(optx.AbstractSearch):
     size (less damping) by ``grow``, else shrink it by ``shrink``. Needs only the cost: optimistix's own
     linearisation of the residuals goes unused and XLA drops it."""
 
-    grow: float = 2.0
+    grow: float = 1.5
     shrink: float = 0.1
 
     def init(self, y, f_info_struct):
