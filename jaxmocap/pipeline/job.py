@@ -31,7 +31,7 @@ from jaxmocap.io import file_sha256
 from jaxmocap.media import open_media
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chunks import ChunkStore
-from jaxmocap.pipeline.observe import observe
+from jaxmocap.pipeline.observe import Observations, observe
 from jaxmocap.pipeline.outputs import EXPORT_FILES, write_exports, write_overlay
 from jaxmocap.pipeline.regress import Regression, solve_regressors
 
@@ -49,15 +49,20 @@ class RunReport:
     written: list = field(default_factory=list)
 
 
-def _solve(model, obs, iterations, seconds):
-    """IK from the 3D landmarks, then the fit to the 2D keypoints, for one chunk of frames."""
-    t0 = time.perf_counter()
+def initial_bodies(model, obs: Observations) -> smplx_jax.SMPLXParams:
+    """The fit's start for each frame: IK of the body to BlazePose's world landmarks, then of each hand to its
+    landmarks with the body fixed (batched `SMPLXParams`)."""
     theta, betas, _, _ = body_from_blazepose(model, obs.body_world)
     for side, name in enumerate(("left", "right")):
         conf = np.repeat(obs.hands_conf[:, side:side + 1] > 0, 21, axis=1).astype(np.float32)
         theta, betas, _, _ = hand_into_body(model, name, obs.hands_world[:, side], theta, betas, conf=conf)
-    init = params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression)
-    jax.block_until_ready(init)
+    return params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression)
+
+
+def _solve(model, obs, iterations, seconds):
+    """IK from the 3D landmarks, then the fit to the 2D keypoints, for one chunk of frames."""
+    t0 = time.perf_counter()
+    init = jax.block_until_ready(initial_bodies(model, obs))
     t1 = time.perf_counter()
     result = fit(model, obs.keypoints, init=init, iterations=iterations)
     jax.block_until_ready(result)

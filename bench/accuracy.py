@@ -1,0 +1,256 @@
+"""Accuracy on real footage (DESIGN 2.5): monocular runs on views of Pose2Sim's single-person take, scored against
+the multi-view 3D reference beside BlazePose's own monocular 3D (the world landmarks the fit starts from), stage
+by stage: BlazePose, the IK start, the fit, the smoothed motion (what ``jaxmocap run`` writes).
+
+    python bench/accuracy.py [--views cam01 cam03] [--out bench/results] [--sheet docs/accuracy_worst_frames.png]
+    (or: jaxmocap bench --only accuracy)
+
+Metrics, per frame where the reference has at least 8 of its 12 limb joints (L/R shoulder, elbow, wrist, hip, knee,
+ankle): PA-MPJPE (mm, after the best similarity transform of that frame), knee and elbow flexion MAE (degrees,
+alignment-free), acceleration error (mm/frame^2, second differences of the aligned joints against the reference's,
+over three consecutive scored frames); for the motion: frames valid, median and > 40 px share of the 2D
+reprojection error, and the frame-to-frame change of the stored rotations (global and body joints, at 60 fps).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from train.metrics import procrustes_align  # noqa: E402
+
+DATA = ROOT / "tests" / "data"
+VIEWS = {"cam01": ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4",
+         "cam03": DATA / "pose2sim_single_cam03.mp4"}
+REFERENCE = DATA / "pose2sim_single_reference_3d.npz"
+SMPLX_LIMB_JOINTS = (16, 17, 18, 19, 20, 21, 1, 2, 4, 5, 7, 8)  # the reference's order (DESIGN 2.5)
+BLAZEPOSE_LIMB_LANDMARKS = (11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28)
+MIN_JOINTS = 8
+# (proximal, middle, distal) of the reference's order: L/R knee, L/R elbow
+FLEXION_TRIPLES = ((6, 8, 10), (7, 9, 11), (0, 2, 4), (1, 3, 5))
+
+
+@dataclass
+class Score:
+    frames_scored: int
+    pa_mpjpe_mm: float
+    flexion_mae_deg: float
+    accel_error_mm: float
+
+
+def load_reference(path=REFERENCE) -> np.ndarray:
+    """``(T, 12, 3)`` metres, NaN where missing."""
+    with np.load(path) as f:
+        return f["joints3d"].astype(np.float64)
+
+
+def _flexion_deg(joints: np.ndarray) -> np.ndarray:
+    """``(T, 4)`` flexion angles (180 - the angle at the middle joint), degrees."""
+    out = []
+    for a, b, c in FLEXION_TRIPLES:
+        u, v = joints[:, a] - joints[:, b], joints[:, c] - joints[:, b]
+        angle = np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.sum(u * v, -1))
+        out.append(180.0 - np.degrees(angle))
+    return np.stack(out, 1)
+
+
+def score(joints: np.ndarray, reference: np.ndarray) -> tuple[Score, np.ndarray]:
+    """Score ``(T, 12, 3)`` joints (any units proportional to metres, NaN where missing) against the reference;
+    also returns each frame's PA-MPJPE in mm (NaN where not scored)."""
+    present = np.all(np.isfinite(reference), -1) & np.all(np.isfinite(joints), -1)
+    scored = present.sum(1) >= MIN_JOINTS
+    aligned = np.full_like(reference, np.nan)
+    per_frame = np.full(len(reference), np.nan)
+    for t in np.flatnonzero(scored):
+        aligned[t] = procrustes_align(joints[t], np.nan_to_num(reference[t]), present[t])
+        per_frame[t] = 1000 * np.mean(np.linalg.norm(aligned[t] - reference[t], axis=-1)[present[t]])
+    flexion_error = np.abs(_flexion_deg(joints) - _flexion_deg(reference))[scored]
+    accel = []
+    for t in range(1, len(reference) - 1):
+        if scored[t - 1:t + 2].all():
+            ok = present[t - 1:t + 2].all(0)
+            a = aligned[t - 1] - 2 * aligned[t] + aligned[t + 1]
+            r = reference[t - 1] - 2 * reference[t] + reference[t + 1]
+            accel.append(1000 * np.linalg.norm(a - r, axis=-1)[ok])
+    return Score(int(scored.sum()), float(np.nanmean(per_frame)), float(np.nanmean(flexion_error)),
+                 float(np.mean(np.concatenate(accel))) if accel else float("nan")), per_frame
+
+
+def rotation_changes_deg(global_orient: np.ndarray, body_pose: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Angle between consecutive frames' rotations of the global orientation and the 21 body joints, degrees,
+    over consecutive valid frames: ``(pairs, 22)``."""
+    from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
+
+    rot = np.asarray(rotvec_to_rotmat(np.concatenate([global_orient[:, None], body_pose], 1)))
+    pairs = np.flatnonzero(valid[:-1] & valid[1:])
+    relative = np.einsum("tjik,tjil->tjkl", rot[pairs], rot[pairs + 1])  # R_t^T R_t+1
+    return np.degrees(np.linalg.norm(np.asarray(rotmat_to_rotvec(relative)), axis=-1))
+
+
+def rotation_coherence(motion: dict) -> dict:
+    changes = rotation_changes_deg(motion["global_orient"], motion["body_pose"], motion["valid"])
+    return dict(rotation_change_median_deg=float(np.median(changes)),
+                rotation_change_over_45deg=float(np.mean(changes > 45)))
+
+
+@dataclass
+class Stages:
+    """One view's per-frame results: BlazePose's limb landmarks, the IK start, the fit, the smoothed motion."""
+
+    blazepose: np.ndarray  # (T, 12, 3) world landmarks, NaN where no person
+    ik: dict  # motion-like arrays of each stage (global_orient, body_pose, ..., valid)
+    fit: dict
+    motion: dict  # as `jaxmocap run` writes it
+
+
+def run_stages(video: Path, work: Path) -> Stages:
+    """``jaxmocap run`` on ``video`` (its motion.npz), and the stages before smoothing, from the same library calls."""
+    import jax
+
+    import smplx_jax
+    from jaxmocap.detect import Detector
+    from jaxmocap.integrate import fit, fitted_motion
+    from jaxmocap.media import open_media
+    from jaxmocap.motion import read_motion
+    from jaxmocap.pipeline import initial_bodies, observe, run
+
+    run(video, work, overlay=False, progress=False)
+    motion = read_motion(work / "motion.npz")
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    _, frames = open_media(video, 0, None, 1)
+    obs = observe(Detector(), [frame for _, frame in frames])
+    blazepose = np.where(obs.found[:, None, None], obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], np.nan)
+    init = initial_bodies(model, obs)
+    result = jax.block_until_ready(fit(model, obs.keypoints, init=init))
+    stage = lambda params, s, t, valid: fitted_motion(model, params, s, t, valid, obs.keypoints, smooth=False)  # noqa
+    ones = np.ones(len(obs.found))
+    ik = stage(init, ones, np.zeros((len(ones), 2)), obs.found)
+    return Stages(blazepose, ik, stage(result.params, result.camera_scale, result.camera_trans,
+                                       obs.found & np.asarray(result.valid)), motion)
+
+
+def limb_joints(motion: dict) -> np.ndarray:
+    """``(T, 12, 3)`` SMPL-X limb joints of a motion (NaN where not valid)."""
+    import jax
+
+    import smplx_jax
+    from jaxmocap.motion import motion_params
+
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    joints = np.asarray(jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))(
+        model, motion_params(motion, model.num_expression)))[:, SMPLX_LIMB_JOINTS]
+    return np.where(np.asarray(motion["valid"])[:, None, None], joints, np.nan)
+
+
+def report_view(name: str, stages: Stages, reference: np.ndarray) -> dict:
+    rows = {}
+    for stage, joints in (("blazepose", stages.blazepose), ("ik", limb_joints(stages.ik)),
+                          ("fit", limb_joints(stages.fit)), ("motion", limb_joints(stages.motion))):
+        result, per_frame = score(joints, reference)
+        rows[stage] = asdict(result) | {"per_frame_pa_mpjpe_mm": [None if np.isnan(v) else round(float(v), 1)
+                                                                    for v in per_frame]}
+        if stage != "blazepose":
+            motion = getattr(stages, stage)
+            rows[stage] |= rotation_coherence(motion)
+            if stage != "ik":
+                errors = np.asarray(motion["reprojection_error_px"])[np.asarray(motion["valid"])]
+                rows[stage] |= dict(valid_share=float(np.mean(motion["valid"])),
+                                    reprojection_median_px=float(np.median(errors)),
+                                    reprojection_over_40px=float(np.mean(np.asarray(motion["reprojection_error_px"])
+                                                                         > 40)))
+    return rows
+
+
+def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count: int = 3) -> None:
+    """The ``count`` worst frames of each view by PA-MPJPE: the mesh over the frame beside its side view."""
+    import cv2
+    import jax
+
+    import smplx_jax
+    from jaxmocap.media import open_media
+    from jaxmocap.motion import motion_params
+    from jaxmocap.overlay import mesh_over_frame, side_view
+
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    faces = np.asarray(model.faces)
+    forward = jax.jit(smplx_jax.forward)
+    rows = []
+    for name, video in views.items():
+        errors = np.asarray(per_frame[name], float)
+        worst = [int(t) for t in np.argsort(np.nan_to_num(errors, nan=-1.0))[::-1][:count]]
+        _, frames = open_media(video, 0, None, 1)
+        images = {i: frame for i, frame in frames if i in worst}
+        motion = motions[name]
+        tiles = []
+        for t in worst:
+            params = jax.tree.map(lambda a: a[t], motion_params(motion, model.num_expression))
+            vertices = np.asarray(forward(model, params).vertices)
+            scale = 480 / images[t].shape[0]
+            left = mesh_over_frame(images[t], vertices, faces, float(motion["camera_scale"][t]),
+                                   motion["camera_trans"][t], scale)
+            lo, hi = vertices.min(0), vertices.max(0)
+            right = side_view(vertices, faces, left.shape[1::-1], 0.75 * left.shape[0] / (hi - lo).max(), (lo + hi) / 2)
+            tile = np.concatenate([left, right], axis=1)
+            cv2.putText(tile, f"{name} frame {t}: {errors[t]:.0f} mm", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.6,
+                        (0, 0, 255), 2)
+            tiles.append(tile)
+        rows.append(np.concatenate(tiles, axis=1))
+    width = max(r.shape[1] for r in rows)
+    sheet = np.concatenate([np.pad(r, ((0, 0), (0, width - r.shape[1]), (0, 0)), constant_values=255) for r in rows])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), sheet)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("bench/results"))
+    parser.add_argument("--quick", action="store_true", help="the bundled view only")
+    parser.add_argument("--views", nargs="*", choices=sorted(VIEWS), default=sorted(VIEWS))
+    parser.add_argument("--sheet", type=Path, default=None, help="contact sheet PNG of the worst frames")
+    args = parser.parse_args()
+    import tempfile
+
+    views = {v: VIEWS[v] for v in (["cam01"] if args.quick else args.views)}
+    reference = load_reference()
+    results, motions, per_frame = {}, {}, {}
+    for name, video in views.items():
+        begin = time.perf_counter()
+        with tempfile.TemporaryDirectory() as work:
+            stages = run_stages(video, Path(work))
+        results[name] = report_view(name, stages, reference) | {"seconds": time.perf_counter() - begin}
+        motions[name] = stages.motion
+        per_frame[name] = results[name]["motion"]["per_frame_pa_mpjpe_mm"]
+
+    print(f"\naccuracy on real footage (Pose2Sim single-person take), {platform.machine()}")
+    print(f"{'view':>6} {'stage':>10} {'frames':>6} {'PA-MPJPE mm':>11} {'flex MAE':>9} {'accel':>7} "
+          f"{'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7}")
+    for name, rows in results.items():
+        for stage in ("blazepose", "ik", "fit", "motion"):
+            r = rows[stage]
+            extra = (f"{r['reprojection_median_px']:>9.1f} {100 * r['reprojection_over_40px']:>5.0f}% "
+                     f"{100 * r['valid_share']:>5.0f}%" if "valid_share" in r else f"{'':>9} {'':>6} {'':>6}")
+            coherence = (f"{r['rotation_change_median_deg']:>7.1f}° {100 * r['rotation_change_over_45deg']:>6.1f}%"
+                         if "rotation_change_median_deg" in r else "")
+            print(f"{name:>6} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
+                  f"{r['flexion_mae_deg']:>8.1f}° {r['accel_error_mm']:>7.1f} {extra} {coherence}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "accuracy.json").write_text(json.dumps(dict(benchmark="accuracy", machine=platform.machine(),
+                                                            views=results), indent=1))
+    print(f"wrote {args.out / 'accuracy.json'}")
+    if args.sheet:
+        contact_sheet(args.sheet, views, motions, per_frame)
+        print(f"wrote {args.sheet}")
+
+
+if __name__ == "__main__":
+    main()
