@@ -113,30 +113,31 @@ class Stages:
     motion: dict  # as `jaxmocap run` writes it
 
 
-def run_stages(video: Path, work: Path) -> Stages:
-    """``jaxmocap run`` on ``video`` (its motion.npz), and the stages before smoothing, from the same library calls."""
+def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
+    """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before smoothing, from
+    the same library calls."""
     import jax
 
     import smplx_jax
     from jaxmocap.detect import Detector
-    from jaxmocap.integrate import fit, fitted_motion
+    from jaxmocap.integrate import fitted_motion
     from jaxmocap.media import open_media
-    from jaxmocap.motion import read_motion
-    from jaxmocap.pipeline import initial_bodies, observe, run
+    from jaxmocap.motion import lens, read_motion
+    from jaxmocap.pipeline import fitted_bodies, initial_bodies, observe, run
 
-    run(video, work, overlay=False, progress=False)
+    run(video, work, end=end, overlay=False, progress=False)
     motion = read_motion(work / "motion.npz")
     model = smplx_jax.load_model(smplx_jax.default_model_path())
-    _, frames = open_media(video, 0, None, 1)
-    obs = observe(Detector(), [frame for _, frame in frames])
+    _, frames = open_media(video, 0, end, 1)
+    obs = observe(Detector(static_image_mode=False), [frame for _, frame in frames])  # as `run` detects
     blazepose = np.where(obs.found[:, None, None], obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], np.nan)
     init = initial_bodies(model, obs)
-    result = jax.block_until_ready(fit(model, obs.keypoints, init=init))
-    stage = lambda params, s, t, valid: fitted_motion(model, params, s, t, valid, obs.keypoints, smooth=False)  # noqa
+    result = jax.block_until_ready(fitted_bodies(model, obs, init, motion["image_size"]))
     ones = np.ones(len(obs.found))
-    ik = stage(init, ones, np.zeros((len(ones), 2)), obs.found)
-    return Stages(blazepose, ik, stage(result.params, result.camera_scale, result.camera_trans,
-                                       obs.found & np.asarray(result.valid)), motion)
+    ik = fitted_motion(model, init, ones, np.zeros((len(ones), 2)), obs.found, obs.keypoints, smooth=False)
+    fitted = fitted_motion(model, result.params, result.camera_scale, result.camera_trans,
+                           obs.found & np.asarray(result.valid), obs.keypoints, False, *lens(motion))
+    return Stages(blazepose, ik, fitted, motion)
 
 
 def limb_joints(motion: dict) -> np.ndarray:
@@ -178,8 +179,8 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
 
     import smplx_jax
     from jaxmocap.media import open_media
-    from jaxmocap.motion import motion_params
-    from jaxmocap.overlay import mesh_over_frame, side_view
+    from jaxmocap.motion import lens, motion_params
+    from jaxmocap.overlay import body_up, mesh_over_frame, side_view
 
     model = smplx_jax.load_model(smplx_jax.default_model_path())
     faces = np.asarray(model.faces)
@@ -197,9 +198,10 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
             vertices = np.asarray(forward(model, params).vertices)
             scale = 480 / images[t].shape[0]
             left = mesh_over_frame(images[t], vertices, faces, float(motion["camera_scale"][t]),
-                                   motion["camera_trans"][t], scale)
+                                   motion["camera_trans"][t], scale, *lens(motion))
             lo, hi = vertices.min(0), vertices.max(0)
-            right = side_view(vertices, faces, left.shape[1::-1], 0.75 * left.shape[0] / (hi - lo).max(), (lo + hi) / 2)
+            right = side_view(vertices, faces, left.shape[1::-1], 0.75 * left.shape[0] / (hi - lo).max(), (lo + hi) / 2,
+                              up=body_up(motion["global_orient"][motion["valid"]]))
             tile = np.concatenate([left, right], axis=1)
             cv2.putText(tile, f"{name} frame {t}: {errors[t]:.0f} mm", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.6,
                         (0, 0, 255), 2)

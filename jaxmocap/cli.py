@@ -35,8 +35,8 @@ def _cmd_run(args):
     exports = tuple(f for f in args.export.split(",") if f) if args.export else ()
     _print_report(run(args.input, args.out, model_path=args.model, weights=args.weights, integration=args.integration,
                       keypoints_dir=args.keypoints, start=args.start, end=args.end, stride=args.stride,
-                      chunk_size=args.chunk, iterations=args.iterations, smooth=not args.no_smooth,
-                      overlay=not args.no_overlay, exports=exports, progress=not args.quiet,
+                      chunk_size=args.chunk, iterations=args.iterations, focal_length=args.focal_length,
+                      smooth=not args.no_smooth, overlay=not args.no_overlay, exports=exports, progress=not args.quiet,
                       hand_boxes=args.hand_boxes, frankmocap_pkl=args.frankmocap_pkl))
 
 
@@ -112,6 +112,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--stride", type=int, default=1, help="use every n-th frame (default: 1)")
     p.add_argument("--export", default="", help="comma-separated: bvh,gltf")
     p.add_argument("--iterations", type=int, default=20, help="fit iterations (default: %(default)s)")
+    p.add_argument("--focal-length", type=float, default=None, metavar="PX",
+                   help="the camera's focal length in pixels (default: a phone's main camera, 0.75 x the long side)")
     p.add_argument("--chunk", type=int, default=128, help="frames per resumable chunk (default: %(default)s)")
     p.add_argument("--no-smooth", action="store_true", help="no temporal smoothing")
     p.add_argument("--no-overlay", action="store_true", help="no overlay video")

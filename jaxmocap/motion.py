@@ -2,6 +2,11 @@
 
 With ``X = smplx_forward(params).joints`` (``transl`` included) the pixel of a joint in frame ``t`` is
 ``camera_scale[t] * X[..., :2] + camera_trans[t]`` (x right, y down). Hand poses are absolute.
+
+A motion fitted through a pinhole camera (the default pipeline) also holds ``focal_length ()`` and
+``principal_point (2,)`` in pixels: then ``X`` is in the camera's frame (metres; ``transl`` places the body), its
+exact pixels are ``focal_length * X[..., :2] / X[..., 2:] + principal_point``, ``reprojection_error_px`` is theirs,
+and ``camera_scale``, ``camera_trans`` are the weak-perspective projection closest to them (`lens`).
 """
 
 import io
@@ -20,6 +25,14 @@ MOTION_SHAPES = {
     "jaw_pose": (3,), "betas": ("B",), "transl": (3,), "camera_scale": (), "camera_trans": (2,), "valid": (),
     "keypoints_2d": (67, 3), "reprojection_error_px": (), "fps": None, "image_size": None, "model_sha256": None,
 }
+PINHOLE_SHAPES = {"focal_length": (), "principal_point": (2,)}  # both or neither
+
+
+def lens(motion: dict) -> tuple[float | None, np.ndarray | None]:
+    """``(focal_length, principal_point)`` of a motion fitted through a pinhole camera, else ``(None, None)``."""
+    if "focal_length" not in motion:
+        return None, None
+    return float(motion["focal_length"]), np.asarray(motion["principal_point"], np.float64)
 
 
 def _check(motion: dict, where: str) -> None:
@@ -34,6 +47,14 @@ def _check(motion: dict, where: str) -> None:
             num_betas if s == "B" else s for s in shape)
         if actual != expected:
             raise InputError(f"{where}: key {key!r} has shape {actual}, expected {expected}")
+    present = [k for k in PINHOLE_SHAPES if k in motion]
+    if present and len(present) != len(PINHOLE_SHAPES):
+        raise InputError(f"{where}: {present[0]!r} without {({*PINHOLE_SHAPES} - {*present}).pop()!r}")
+    for key in present:
+        if np.shape(motion[key]) != PINHOLE_SHAPES[key]:
+            raise InputError(f"{where}: key {key!r} has shape {np.shape(motion[key])}, expected {PINHOLE_SHAPES[key]}")
+    if present and not float(motion["focal_length"]) > 0:
+        raise InputError(f"{where}: focal_length must be positive, got {float(motion['focal_length'])}")
 
 
 def write_motion(path, motion: dict) -> Path:

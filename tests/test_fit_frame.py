@@ -64,9 +64,10 @@ def test_keypoint_jacobian_is_exact(x64, model_dir):
             np.testing.assert_allclose(a, b, atol=1e-10)
 
 
-def test_the_descents_model_has_the_costs_gradient(x64, default_model_dir):
-    """The IRLS model's gradient is the gradient of the cost optimistix minimises, with joints held fixed;
-    its Hessian is symmetric positive semi-definite."""
+@pytest.mark.parametrize("focal", [None, 1500.0])
+def test_the_descents_model_has_the_costs_gradient(x64, default_model_dir, focal):
+    """The IRLS model's gradient is the gradient of the cost optimistix minimises, with joints held fixed, under
+    weak perspective and a pinhole camera; its Hessian is symmetric positive semi-definite."""
     model = _load64(default_model_dir)
     km = fitting.openpose_keypoint_model(model)
     kp, init = _synthetic64(model, seed=3)
@@ -74,7 +75,8 @@ def test_the_descents_model_has_the_costs_gradient(x64, default_model_dir):
     config = fitting.FitConfig()
     free = jnp.ones(55).at[3:9].set(0.0)
     problem = least_squares.Problem(km, kp[:, :2], kp[:, 2], pose, betas, jnp.asarray(fitting.prior_weights(config)),
-                                    jnp.asarray(400.0), free, jnp.asarray(1.0))
+                                    jnp.asarray(400.0), free, jnp.asarray(1.0),
+                                    jnp.asarray(0.0 if focal is None else 1 / focal), jnp.asarray([470.0, 500.0]))
     rng = np.random.default_rng(1)
     y = least_squares.Unknowns(pose + 0.3 * jnp.asarray(rng.normal(size=(55, 3))), betas + 0.1,
                                jnp.asarray([np.log(390.0), 480.0, 510.0]))

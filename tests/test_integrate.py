@@ -106,6 +106,34 @@ def test_fit_without_noise_is_exact_to_half_a_pixel(model):
     assert np.median(np.asarray(r.reprojection_error_px)) <= 0.5, np.median(np.asarray(r.reprojection_error_px))
 
 
+def test_a_pinhole_fit_recovers_a_near_body_and_its_place(model):
+    """Keypoints of bodies 2-3 m from a pinhole camera (focal 900 px): the pinhole fit lands on them, finds where
+    the body is, and its 3D pose is nearer the truth than weak perspective's (which bends the body to match)."""
+    near = synthetic.make_problem(model, T, seed=4, noise_px=0.0, drop=0.15, focal_length=900.0)
+    centre = np.array(synthetic.IMAGE_SIZE) / 2
+    pinhole = fit(model, near.keypoints, near.init, focal_length=900.0, principal_point=centre)
+    compiled = fitting._fit_batch._cache_size()
+    weak = fit(model, near.keypoints, near.init)
+    assert fitting._fit_batch._cache_size() == compiled  # the camera is data: one compiled fit for both
+    assert np.all(np.asarray(pinhole.status) == fitting.OK)
+    err = np.asarray(pinhole.reprojection_error_px)
+    assert np.median(err) <= 0.5, np.median(err)
+    skeleton = lambda params: np.asarray(synthetic._JOINTS(model, params.replace(transl=0 * params.transl)))[:, :22]
+    error_3d = lambda params: np.median(np.linalg.norm(skeleton(params) - skeleton(near.truth), axis=-1))  # noqa
+    assert error_3d(pinhole.params) < 0.7 * error_3d(weak.params), (error_3d(pinhole.params), error_3d(weak.params))
+    depth, truth = np.asarray(pinhole.params.transl[:, 2]), np.asarray(near.truth.transl[:, 2])
+    assert np.median(np.abs(depth / truth - 1)) <= 0.1 and np.all((depth > 1.5) & (depth < 4.5))
+    joints = synthetic._JOINTS(model, pinhole.params)[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
+    # the stored weak perspective is the closest one: nearer than the one at the body origin's depth
+    seen = near.keypoints[..., 2] > 0
+    pixels = 900.0 * joints[..., :2] / joints[..., 2:] + centre
+    weak_error = lambda scale, trans: np.sum(seen[..., None] * (  # noqa: E731
+        np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None] - pixels) ** 2, (1, 2))
+    transl = np.asarray(pinhole.params.transl)
+    at_origin = weak_error(900.0 / transl[:, 2], 900.0 * transl[:, :2] / transl[:, 2:] + centre)
+    assert np.all(weak_error(pinhole.camera_scale, pinhole.camera_trans) <= at_origin * (1 + 1e-4))
+
+
 def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit):
     before = fitting._fit_batch._cache_size()
     sub = jax.tree.map(lambda a: a[:T - 5], noisy.init)

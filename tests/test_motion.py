@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from jaxmocap.errors import InputError
-from jaxmocap.motion import MOTION_SHAPES, read_motion, write_motion
+from jaxmocap.motion import MOTION_SHAPES, lens, read_motion, write_motion
 
 T = 4
 
@@ -35,3 +35,14 @@ def test_errors_name_the_key(tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"junk")
     with pytest.raises(InputError, match="not a readable motion"):
         read_motion(tmp_path / "junk.npz")
+
+
+def test_the_pinhole_camera_keys_come_together(tmp_path):
+    pinhole = {"focal_length": np.array(1440.0), "principal_point": np.array([540.0, 960.0])}
+    back = read_motion(write_motion(tmp_path / "m.npz", _motion() | pinhole))
+    assert lens(back) == (1440.0, pytest.approx([540.0, 960.0])) and lens(_motion()) == (None, None)
+    for bad, message in (({"focal_length": np.array(1440.0)}, "'focal_length' without 'principal_point'"),
+                         (pinhole | {"principal_point": np.zeros(3)}, r"'principal_point' has shape \(3,\)"),
+                         (pinhole | {"focal_length": np.array(-1.0)}, "focal_length must be positive")):
+        with pytest.raises(InputError, match=message):
+            write_motion(tmp_path / "bad.npz", _motion() | bad)

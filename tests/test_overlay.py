@@ -8,7 +8,7 @@ import numpy as np
 from conftest import load
 
 import smplx_jax
-from jaxmocap.overlay import OverlayWriter, mesh_over_frame
+from jaxmocap.overlay import OverlayWriter, body_up, mesh_over_frame, upright
 from jaxmocap.poses import example_pose
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -33,6 +33,32 @@ def test_mesh_lands_on_its_projection(default_model_dir):
     box = vertices[:, :2] * scale + trans
     covered = np.argwhere(drawn.max(axis=2) > 0)
     assert covered[:, 1].min() >= box[:, 0].min() - 2 and covered[:, 0].max() <= box[:, 1].max() + 2
+
+
+def test_a_pinhole_camera_draws_a_distant_mesh_as_weak_perspective_does(default_model_dir):
+    """Far from a pinhole camera (focal / depth = the weak camera's scale) the two drawings agree; near it, parts
+    nearer the camera are drawn bigger."""
+    model = load(default_model_dir)
+    vertices, _ = _posed(model)
+    frame, faces = np.zeros((400, 300, 3), np.uint8), np.asarray(model.faces)
+    weak = mesh_over_frame(frame, vertices, faces, 150.0, np.array([150.0, 180.0])).max(axis=2) > 0
+    for depth, agree in ((1000.0, 0.99), (2.0, 0.9)):
+        pinhole = mesh_over_frame(frame, vertices + [0, 0, depth], faces, 0.0, np.zeros(2), 1.0, 150.0 * depth,
+                                  np.array([150.0, 180.0])).max(axis=2) > 0
+        iou = (weak & pinhole).sum() / (weak | pinhole).sum()
+        assert iou > agree if depth > 100 else iou < agree, (depth, iou)
+
+
+def test_the_side_view_stands_the_body_up():
+    """A body leaning towards the camera (a camera looking down on it) is stood up: its up axis maps to the
+    image's up, by a rotation."""
+    np.testing.assert_allclose(body_up(np.array([[np.pi, 0.0, 0.0]])), [0, -1, 0], atol=1e-6)  # upright
+    for orient in ([np.pi + 0.6, 0.0, 0.0], [np.pi, 0.0, 0.4], [0.0, 0.0, 0.0]):  # leaning; upside down
+        up = body_up(np.array([orient]))
+        level = upright(up)
+        np.testing.assert_allclose(level @ up, [0, -1, 0], atol=1e-6)
+        np.testing.assert_allclose(level @ level.T, np.eye(3), atol=1e-6)
+        assert np.linalg.det(level) > 0
 
 
 def test_overlay_video_frames_and_size(default_model_dir, tmp_path):

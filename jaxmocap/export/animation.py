@@ -2,8 +2,9 @@
 
 The motion's global orientation is in the image's camera frame (x right, y down, z away from the camera); the
 world frame here is that camera's frame turned by pi about x (x right, y up, z towards the camera), the frame
-glTF and Blender's importers expect. The weak-perspective camera gives depth ``focal / camera_scale`` for an
-assumed focal length in pixels (default: the image diagonal, a ~53 degree field of view).
+glTF and Blender's importers expect. A motion fitted through a pinhole camera places the body by ``transl``; a
+weak-perspective one at depth ``focal / camera_scale`` for an assumed focal length in pixels (default: the image
+diagonal, a ~53 degree field of view).
 """
 
 from dataclasses import dataclass
@@ -12,7 +13,7 @@ import jax
 import numpy as np
 
 import smplx_jax
-from jaxmocap.motion import motion_params
+from jaxmocap.motion import lens, motion_params
 from smplx_jax import constants
 from smplx_jax.rotations import rotvec_to_rotmat
 
@@ -59,7 +60,7 @@ def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None)
     origin = np.concatenate([
         (np.asarray(motion["camera_trans"], np.float64)[held] - [width / 2, height / 2]) / scale[:, None],
         (focal / scale)[:, None],
-    ], axis=1)  # the body model's origin in the camera frame
+    ], axis=1) if lens(motion)[0] is None else 0.0  # the body model's origin in the camera frame
     root_camera = origin + np.asarray(motion["transl"], np.float64)[held] + rest_joints[0]
     return Animation(
         names=constants.JOINT_NAMES, parents=model.parents, rest_joints=rest_joints, local_rotmats=local,

@@ -1,11 +1,13 @@
-"""Optimization integration: fit SMPL-X (pose, both hands, shape, weak-perspective camera) to 2D keypoints.
+"""Optimization integration: fit SMPL-X (pose, both hands, shape, camera) to 2D keypoints.
 
     result = fit_frame(model, keypoints, init)     # one frame: keypoints (67, 3) BODY_25, left, right hand; x, y, conf
     result = fit(model, keypoints, init=params)    # (T, 67, 3): vmap of the same fit, padded to fixed batch sizes
 
 Each frame is a robust least-squares problem solved by `optimistix.least_squares` (`least_squares.solve`):
 confidence-weighted Cauchy-robust reprojection of the 67 keypoints, a prior that keeps each joint near the initial
-pose (weaker for hands), shape L2 and elbow/knee bending limits. `fit_frame` is pure: it works under `jax.jit`,
+pose (weaker for hands), shape L2 and elbow/knee bending limits. The camera is a pinhole of known focal length
+(``focal_length`` and ``principal_point``: the body's depth and perspective are fitted, ``params.transl`` is its
+origin in the camera frame) or weak perspective (no focal length). `fit_frame` is pure: it works under `jax.jit`,
 `jax.vmap` and `jax.grad`; gradients of the fitted parameters with respect to the keypoints, their confidences,
 the start and the camera come from implicit differentiation. `fit` jits it once per padded batch size
 (`BUCKETS`; longer inputs run in chunks of the largest) and spreads the frames over all devices.
@@ -24,7 +26,7 @@ import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from jaxmocap.integrate import least_squares
-from jaxmocap.integrate.camera import weak_perspective_from_points
+from jaxmocap.integrate.camera import weak_perspective_from_points, weak_perspective_least_squares
 from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, keypoints_cm, params_of
 from jaxmocap.sharding import shard_frames
 from smplx_jax import BodyModel, SMPLXParams, constants
@@ -39,7 +41,10 @@ FitConfig = least_squares.SolverConfig
 
 class FitResult(NamedTuple):
     """A fit: one frame from `fit_frame`, a leading axis T from `fit`. ``status``: 0 fitted, 1 too few
-    keypoints, 2 numerical failure; frames with a non-zero status hold the initial parameters and camera."""
+    keypoints, 2 numerical failure; frames with a non-zero status hold the initial parameters and camera.
+    ``camera_scale``, ``camera_trans``: the weak-perspective projection of the fitted body (``transl`` included,
+    DESIGN 2.3), for a pinhole camera the one closest to its projection. ``reprojection_error_px``: the fit's
+    own (perspective for a pinhole camera)."""
 
     params: SMPLXParams
     camera_scale: Float[Array, "*T"]
@@ -77,9 +82,11 @@ def prior_weights(config: FitConfig) -> np.ndarray:
     return prior
 
 
-def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, config: FitConfig) -> FitResult:
-    """One frame from its full pose ``(55, 3)``; ``camera`` (3,) or None (fitted to the start)."""
+def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig) -> FitResult:
+    """One frame from its full pose ``(55, 3)``; ``camera`` (3,) or None (fitted to the start); ``lens``:
+    (1 / focal length, principal point), 1 / focal length 0 for weak perspective."""
     dtype = pose.dtype
+    inv_focal, center = lens
     finite = jnp.all(jnp.isfinite(keypoints), axis=-1)
     conf = jnp.where(finite & (keypoints[:, 2] > 0), keypoints[:, 2], 0.0)
     target = jnp.where(finite[:, None], keypoints[:, :2], 0.0)
@@ -89,18 +96,25 @@ def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, config: FitConfi
         camera = jnp.concatenate([scale[None], trans])
     sref = jnp.where(jnp.isfinite(camera[0]) & (camera[0] > 0), camera[0], 1.0)
     problem = least_squares.Problem(km, target, conf, pose, betas, jnp.asarray(prior_weights(config), dtype), sref,
-                                    jnp.ones(55, dtype), jnp.ones((), dtype))
+                                    jnp.ones(55, dtype), jnp.ones((), dtype), inv_focal, center)
     start = least_squares.Unknowns(pose, betas, jnp.concatenate([jnp.log(sref)[None], camera[1:]]))
     solution = least_squares.solve(problem, start, config)
     out = solution.value
 
-    def reprojection_error(pose, betas, scale, trans):
-        err = jnp.linalg.norm(scale * keypoints_cm(km, pose, betas)[:2].T + trans - target, axis=-1)
+    def reprojection_error(pixels):
+        err = jnp.linalg.norm(pixels.T - target, axis=-1)
         return jnp.sum(jnp.where(seen, err, 0.0)) / jnp.maximum(jnp.sum(seen), 1)
 
-    scale = jnp.exp(out.camera[0])
-    err0 = reprojection_error(pose, betas, camera[0], camera[1:])
-    err = reprojection_error(out.pose_rotvecs, out.betas, scale, out.camera[1:])
+    err0 = reprojection_error(least_squares.project(keypoints_cm(km, pose, betas), start.camera, problem)[0])
+    points = keypoints_cm(km, out.pose_rotvecs, out.betas)
+    pixels = least_squares.project(points, out.camera, problem)[0]
+    err = reprojection_error(pixels)
+    scale, trans = jnp.exp(out.camera[0]), out.camera[1:]
+    pinhole = inv_focal > 0
+    transl = jnp.where(pinhole, jnp.append((trans - center) / scale, 1.0 / jnp.where(pinhole, inv_focal * scale, 1.0)),
+                       0.0)
+    weak_scale, weak_trans = weak_perspective_least_squares((points + transl[:, None])[:2].T, pixels.T, conf)
+    scale, trans = jnp.where(pinhole, weak_scale, scale), jnp.where(pinhole, weak_trans, trans)
     enough = jnp.sum(seen) >= MIN_KEYPOINTS
     solved = ((solution.result == optx.RESULTS.successful)
               | (solution.result == optx.RESULTS.nonlinear_max_steps_reached))
@@ -110,26 +124,41 @@ def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, config: FitConfi
     pick = functools.partial(jnp.where, keep)
     err0 = jnp.where(enough & jnp.isfinite(err0), err0, 0.0)
     params = params_of(pick(out.pose_rotvecs, pose), pick(out.betas, betas), km.body.num_expression)
-    return FitResult(params, pick(scale, camera[0]), pick(out.camera[1:], camera[1:]), status, pick(err, err0), err0,
+    params = params.replace(transl=pick(transl, jnp.zeros_like(transl)))
+    return FitResult(params, pick(scale, camera[0]), pick(trans, camera[1:]), status, pick(err, err0), err0,
                      jnp.where(keep, solution.state.num_accepted_steps - 1, 0))
 
 
+def _lens(focal_length, principal_point, dtype):
+    """``(1 / focal length, principal point)``; zeros for weak perspective."""
+    if focal_length is None:
+        return jnp.zeros((), dtype), jnp.zeros(2, dtype)
+    if principal_point is None:
+        raise ValueError("principal_point is needed with focal_length")
+    return 1.0 / jnp.asarray(focal_length, dtype), jnp.asarray(principal_point, dtype)
+
+
 def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXParams, *,
-              camera: Float[Array, "3"] | None = None, iterations: int = 20,
+              camera: Float[Array, "3"] | None = None, focal_length: float | None = None,
+              principal_point: Float[Array, "2"] | None = None, iterations: int = 20,
               config: FitConfig | None = None) -> FitResult:
     """Fit one frame's ``keypoints (67, 3)`` (pixels; confidence 0 or NaN/inf = missing) from ``init`` (one
-    body; hand poses absolute; ``transl`` and ``expression`` ignored, the result has zeros). ``camera``:
-    ``(scale, tx, ty)`` to start from, or None to fit it to the start's keypoints. Pure and differentiable
-    (implicit differentiation; an unseen keypoint's gradient is zero)."""
+    body; hand poses absolute; ``transl`` and ``expression`` ignored, the result has no expression).
+    ``camera``: ``(scale, tx, ty)`` of the body's origin (``pixel = scale * x + t`` there) to start from, or None
+    to fit it to the start's keypoints. ``focal_length`` (pixels) and ``principal_point`` (2,): a pinhole camera
+    (``transl`` of the result is the body's origin in its frame, metres); None: weak perspective. Pure and
+    differentiable (implicit differentiation; an unseen keypoint's gradient is zero)."""
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
     km = openpose_keypoint_model(model)
-    return _fit_one(km, keypoints, init.full_pose(), init.betas, camera, config)
+    pose = init.full_pose()
+    return _fit_one(km, keypoints, pose, init.betas, camera, _lens(focal_length, principal_point, pose.dtype), config)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
-def _fit_batch(km, keypoints, pose, betas, camera, config: FitConfig):
+def _fit_batch(km, keypoints, pose, betas, camera, lens, config: FitConfig):
     one = functools.partial(_fit_one, config=config)
-    return jax.vmap(one, in_axes=(None, 0, 0, 0, None if camera is None else 0))(km, keypoints, pose, betas, camera)
+    return jax.vmap(one, in_axes=(None, 0, 0, 0, None if camera is None else 0, None))(km, keypoints, pose, betas,
+                                                                                       camera, lens)
 
 
 def bucket_size(n: int) -> int:
@@ -156,9 +185,11 @@ def _check(name, value, shape, dtype):
 
 
 def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_scale=None, camera_trans=None, *,
-        iterations: int = 20, config: FitConfig | None = None, progress=None) -> FitResult:
+        focal_length: float | None = None, principal_point=None, iterations: int = 20,
+        config: FitConfig | None = None, progress=None) -> FitResult:
     """Fit every frame of ``keypoints (T, 67, 3)`` (`fit_frame` vmapped). ``init``: batched `SMPLXParams` (T
-    leading), default `default_pose` with mean shape. Camera: given (both arrays), or fitted to the start.
+    leading), default `default_pose` with mean shape. Camera: given (both arrays), or fitted to the start; a
+    pinhole of ``focal_length`` and ``principal_point`` or weak perspective (`fit_frame`).
     ``progress(n)`` is called after each chunk with the number of frames done. Runs in the model's precision
     (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64)."""
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
@@ -179,6 +210,7 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
         camera = np.concatenate([_check("camera_scale", camera_scale, (t,), dtype)[:, None],
                                  _check("camera_trans", camera_trans, (t, 2), dtype)], axis=1)
     km = openpose_keypoint_model(model)
+    lens = _lens(focal_length, principal_point, dtype)
     outs = []
     for start in range(0, t, BUCKETS[-1]):
         stop = min(t, start + BUCKETS[-1])
@@ -188,7 +220,7 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
         kp = pad(keypoints)
         kp[n:] = 0.0  # padding frames have no keypoints
         frames = shard_frames((kp, pad(pose), pad(betas), None if camera is None else pad(camera)), size)
-        out = _fit_batch(km, *frames, config)
+        out = _fit_batch(km, *frames, lens, config)
         outs.append(jax.tree.map(lambda a: np.asarray(a)[:n], out))
         if progress is not None:
             progress(n)

@@ -34,8 +34,13 @@ BODY_IK_JOINTS = tuple(j <= 21 and j not in (20, 21) for j in range(55))  # glob
 LEFT_HAND_IK_JOINTS = tuple(j == 20 or 25 <= j < 40 for j in range(55))
 RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
 
+# Priors toward the start (metres per radian): bone twists, and how a rotation splits between a joint and its
+# neighbours, are not seen by joint positions; with weaker body priors (2e-3) IK picked them afresh in every frame
+# of real footage (knees, ankles and feet turning by ~100 degrees between frames 1/60 s apart, 35-55% of
+# joint-frames over 45 degrees); 0.03 keeps them where the start puts them at no cost in 3D accuracy
+# (`bench/accuracy.py`, docs/BENCHMARKS.md).
 IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, cg_iterations=30, prior_global=1e-4,
-                             prior_body=2e-3, prior_hand=5e-4, robust_scale=0.2)
+                             prior_body=0.03, prior_hand=5e-4, robust_scale=0.2)
 
 
 def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
@@ -47,7 +52,7 @@ def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     prior = np.where(np.arange(55) == 0, config.prior_global,
                      np.where(np.arange(55) <= 21, config.prior_body, config.prior_hand)).astype(np.float32)
     problem = least_squares.Problem(km, targets, conf, theta, betas, jnp.asarray(prior), jnp.ones((), theta.dtype),
-                                    free_joints, fit_betas)
+                                    free_joints, fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
     start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))
     out = least_squares.solve(problem, start, config).value
     pose, betas_out = least_squares.pose_and_shape(out, problem)

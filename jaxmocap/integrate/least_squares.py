@@ -1,8 +1,10 @@
 """One body's robust, regularised least squares, solved by `optimistix.least_squares` (`solve`).
 
-Unknowns (`Unknowns`): the 55 joint axis-angles, ``betas`` and a similarity camera ``(log scale, t_1..t_D)``
-mapping model points ``x`` to data ``scale * x[:D] + t`` (D = 2: weak perspective to pixels, the 2D fit; D = 3:
-metric 3D landmarks up to scale and offset, IK). `Problem` says which joints (and whether the shape) are free.
+Unknowns (`Unknowns`): the 55 joint axis-angles, ``betas`` and a camera ``(log scale, t_1..t_D)`` mapping model
+points ``x`` to data ``(scale * x[:D] + t - c) / (1 + scale * x[2] / f) + c`` (`project`). D = 2, the 2D fit:
+pixels through a pinhole camera of focal length ``f`` and principal point ``c`` (the body's origin at depth
+``f / scale``), or weak perspective where ``1 / f = 0``; D = 3, IK: metric 3D landmarks up to scale and offset
+(``1 / f = 0``, ``c = 0``). `Problem` says which joints (and whether the shape) are free.
 
 Residuals (`residuals`; half their sum of squares is the cost):
 
@@ -81,6 +83,8 @@ class Problem(NamedTuple):
     scale_ref: Float[Array, ""]  # pixels (or data units) per metre
     free: Float[Array, "55"]  # 1 = joint free
     fit_betas: Float[Array, ""]  # 1 = shape free
+    inv_focal: Float[Array, ""]  # 1 / focal length (pixels); 0: weak perspective (and IK)
+    center: Float[Array, "D"]  # principal point (pixels); 0 for IK
 
 
 class Residuals(NamedTuple):
@@ -115,9 +119,12 @@ def pose_and_shape(y: Unknowns, problem: Problem):
     return pose, jnp.where(problem.fit_betas > 0, y.betas, problem.betas0)
 
 
-def _errors(x, camera, target):
-    d = target.shape[1]
-    return jnp.exp(camera[0]) * x[:d] + camera[1:, None] - target.T  # (D, K)
+def project(x: Float[Array, "3 K"], camera: Float[Array, "C"], problem: Problem):
+    """The keypoints' data points ``(D, K)``, and each one's depth relative to the body origin's ``(K,)``."""
+    d = problem.target.shape[1]
+    center = problem.center[:, None]
+    depth = jnp.maximum(1.0 + problem.inv_focal * jnp.exp(camera[0]) * x[2], 0.1)  # never behind the camera
+    return (jnp.exp(camera[0]) * x[:d] + camera[1:, None] - center) / depth + center, depth
 
 
 def _cauchy_u(r, problem: Problem, config: SolverConfig):
@@ -128,7 +135,7 @@ def _cauchy_u(r, problem: Problem, config: SolverConfig):
 def residuals(y: Unknowns, problem: Problem, config: SolverConfig) -> Residuals:
     """The residuals whose half sum of squares is the cost (the function optimistix minimises)."""
     pose, betas = pose_and_shape(y, problem)
-    r = _errors(keypoints.keypoints_cm(problem.km, pose, betas), y.camera, problem.target)
+    r = project(keypoints.keypoints_cm(problem.km, pose, betas), y.camera, problem)[0] - problem.target.T
     sref = problem.scale_ref
     return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(_cauchy_u(r, problem, config))),
                      sref * problem.prior[:, None] * (pose - problem.pose0), sref * config.prior_betas * betas,
@@ -158,8 +165,8 @@ class Blocks(NamedTuple):
 
 
 def _data_blocks(lin: Linearization, scale, w, d: int, km: KeypointModel):
-    """Diagonal blocks of ``J^T diag(w) J`` of the data term: 3x3 per joint (from moments of the keypoints about
-    it: one GEMM with ``reach ** 2``), the shape diagonal and the camera block (log scale, translation)."""
+    """Diagonal blocks of ``J^T diag(w) J`` of the data term of a similarity camera: 3x3 per joint (from moments of
+    the keypoints about it: one GEMM with ``reach ** 2``) and the shape diagonal."""
     x, p = lin.x, lin.p
     nk = w.shape[0]
     xx = (x[:, None, :] * x[None, :, :]).reshape(9, nk)
@@ -176,11 +183,15 @@ def _data_blocks(lin: Linearization, scale, w, d: int, km: KeypointModel):
     b_pose = (scale * scale) * mat3.matmul(jnp.swapaxes(lin.a, 0, 1), mat3.matmul(b_omega, lin.a))
     jb = lin.jb[:, : d * nk]
     b_betas = (scale * scale) * ((jb * jb) @ jnp.tile(w, d))
-    xd = scale * x[:d]
-    cross = jnp.sum(w * xd, 1)
-    b_camera = jnp.concatenate([jnp.concatenate([jnp.sum(w * xd * xd)[None], cross])[None],
-                                jnp.concatenate([cross[:, None], jnp.sum(w) * jnp.eye(d, dtype=x.dtype)], 1)])
-    return b_pose, b_betas, b_camera
+    return b_pose, b_betas
+
+
+def _camera_block(w, dlogscale, depth):
+    """``J^T diag(w) J`` of the camera (log scale, translation): ``dlogscale (D, K)`` the log scale's column."""
+    d = dlogscale.shape[0]
+    cross = jnp.sum(w * dlogscale / depth, 1)
+    return jnp.concatenate([jnp.concatenate([jnp.sum(w * dlogscale * dlogscale)[None], cross])[None],
+                            jnp.concatenate([cross[:, None], jnp.sum(w / depth**2) * jnp.eye(d, dtype=w.dtype)], 1)])
 
 
 def _prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Unknowns]:
@@ -199,9 +210,10 @@ def _prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig
 class IRLSModel(eqx.Module):
     """The descent's local model of the cost at ``y`` (`descent.DampedNewtonCG`): the keypoint errors weighted
     by Cauchy's ``rho' = conf / (1 + u)`` held at ``y`` (IRLS), with the analytic Jacobian of the keypoints
-    (one `keypoints.linearize`), and the priors. Returns the cost's exact gradient, ``v -> H v`` (IRLS
-    Gauss-Newton, with the millimetre terms of the keypoint Jacobian left out: cheaper, still positive
-    semi-definite) and the block diagonal of ``H``, all masked to the free unknowns."""
+    (one `keypoints.linearize`) and of the projection, and the priors. Returns the cost's exact gradient,
+    ``v -> H v`` (IRLS Gauss-Newton, with the millimetre terms of the keypoint Jacobian left out: cheaper, still
+    positive semi-definite) and a block diagonal of ``H`` (the preconditioner; without the projection's depth
+    terms), all masked to the free unknowns."""
 
     problem: Problem
     config: SolverConfig = eqx.field(static=True)
@@ -212,27 +224,38 @@ class IRLSModel(eqx.Module):
         pose, betas = pose_and_shape(y, problem)
         lin = keypoints.linearize(km, pose, betas)
         scale = jnp.exp(y.camera[0])
-        r = _errors(lin.x, y.camera, problem.target)
+        points, depth = project(lin.x, y.camera, problem)
+        r = points - problem.target.T
         w = problem.conf / (1.0 + _cauchy_u(r, problem, config))
+        gain = scale / depth  # d points / d x[:D]
+        slope = problem.inv_focal * (points - problem.center[:, None])  # d points / d x[2] = -gain * slope
+
+        def image(dx):  # (3, K) -> (D, K)
+            return gain * (dx[:d] - slope * dx[2])
+
+        dlogscale = image(lin.x)
         mask = Unknowns(jnp.broadcast_to(problem.free[:, None], pose.shape),
                         jnp.broadcast_to(problem.fit_betas, betas.shape), jnp.ones_like(y.camera))
         prior_gradient, prior_hessian = _prior_quadratic(pose, betas, y.camera, problem, config)
 
         def jv(v: Unknowns, exact: bool):  # (D, K)
             dx = keypoints.jvp(km, lin, v.pose_rotvecs * mask.pose_rotvecs, v.betas * mask.betas, exact=exact)
-            return scale * dx[:d] + (scale * v.camera[0]) * lin.x[:d] + v.camera[1:, None]
+            return image(dx) + v.camera[0] * dlogscale + v.camera[1:, None] / depth
 
         def jtu(u, exact: bool) -> Unknowns:
-            padded = jnp.concatenate([scale * u, jnp.zeros((3 - d,) + u.shape[1:], u.dtype)])
+            gu = gain * u
+            padded = jnp.concatenate([gu, jnp.zeros((3 - d,) + u.shape[1:], u.dtype)])
+            padded = padded.at[2].add(-jnp.sum(gu * slope, 0))
             dpose, dbetas = keypoints.vjp(km, lin, padded, exact=exact)
-            return Unknowns(dpose, dbetas, jnp.concatenate([(scale * jnp.sum(u * lin.x[:d]))[None], jnp.sum(u, 1)]))
+            return Unknowns(dpose, dbetas, jnp.concatenate([jnp.sum(u * dlogscale)[None], jnp.sum(u / depth, 1)]))
 
         def hessian(v: Unknowns) -> Unknowns:
             return jax.tree.map(lambda a, h, vi, m: (a + h * vi) * m, jtu(w * jv(v, False), False), prior_hessian,
                                 v, mask)
 
         gradient = jax.tree.map(lambda a, g, m: (a + g) * m, jtu(w * r, True), prior_gradient, mask)
-        b_pose, b_betas, b_camera = _data_blocks(lin, scale, w, d, km)
+        b_pose, b_betas = _data_blocks(lin, scale, w / depth**2, d, km)
+        b_camera = _camera_block(w, dlogscale, depth)
         eye = jnp.eye(3, dtype=r.dtype)[:, :, None]
         blocks = Blocks(jnp.where(problem.free > 0, b_pose + prior_hessian.pose_rotvecs.T[:, None, :] * eye, eye),
                         jnp.where(problem.fit_betas > 0, b_betas + prior_hessian.betas, 1.0), b_camera)

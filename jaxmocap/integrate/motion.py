@@ -7,6 +7,7 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.integrate import fitting
+from jaxmocap.integrate.camera import project
 from jaxmocap.integrate.smooth import smooth_camera, smooth_params
 from smplx_jax import constants
 
@@ -15,8 +16,9 @@ _JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
 _SMOOTH = jax.jit(smooth_params)
 
 
-def reprojection_errors(model, params, scale, trans, keypoints) -> np.ndarray:
-    """Mean pixel distance per frame over keypoints with confidence > 0 (0 where none)."""
+def reprojection_errors(model, params, scale, trans, keypoints, focal_length=None, principal_point=None) -> np.ndarray:
+    """Mean pixel distance per frame over keypoints with confidence > 0 (0 where none); the pinhole camera's
+    pixels when ``focal_length`` is given, else the weak-perspective camera's."""
     joints = []
     for start in range(0, keypoints.shape[0], fitting.BUCKETS[-1]):
         stop = min(keypoints.shape[0], start + fitting.BUCKETS[-1])
@@ -25,25 +27,28 @@ def reprojection_errors(model, params, scale, trans, keypoints) -> np.ndarray:
                              params)
         joints.append(np.asarray(_JOINTS(model, chunk))[:n])
     joints = np.concatenate(joints)[:, _OPENPOSE]
-    pix = np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None, :]
+    pix = np.asarray(project(joints, np.asarray(scale), np.asarray(trans), focal_length, principal_point))
     seen = keypoints[..., 2] > 0
     dist = np.where(seen, np.linalg.norm(pix - keypoints[..., :2], axis=-1), 0.0)
     return (dist.sum(1) / np.maximum(seen.sum(1), 1)).astype(np.float32)
 
 
 def fitted_motion(model, params: smplx_jax.SMPLXParams, camera_scale, camera_trans, valid, keypoints,
-                  smooth: bool) -> dict[str, np.ndarray]:
-    """``motion.npz`` arrays (all but ``fps``, ``image_size``, ``model_sha256``) of batched fits; invalid frames
-    keep their parameters and get error 0."""
+                  smooth: bool, focal_length=None, principal_point=None) -> dict[str, np.ndarray]:
+    """``motion.npz`` arrays (all but ``fps``, ``image_size``, ``model_sha256``) of batched fits, with the pinhole
+    camera's ``focal_length`` and ``principal_point`` when given; invalid frames keep their parameters and get
+    error 0."""
     valid = np.asarray(valid, bool)
     scale, trans = jnp.asarray(camera_scale), jnp.asarray(camera_trans)
     if smooth and valid.any():
         params = _SMOOTH(params, jnp.asarray(valid))
         scale, trans = smooth_camera(scale, trans, jnp.asarray(valid))
     keypoints = np.asarray(keypoints, np.float32)
-    errors = reprojection_errors(model, params, scale, trans, keypoints)
+    errors = reprojection_errors(model, params, scale, trans, keypoints, focal_length, principal_point)
+    pinhole = {} if focal_length is None else {"focal_length": np.asarray(focal_length, np.float32),
+                                               "principal_point": np.asarray(principal_point, np.float32)}
     arrays = {k: np.asarray(getattr(params, k), np.float32) for k in (
         "global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "betas", "transl")}
     return arrays | {"camera_scale": np.asarray(scale, np.float32), "camera_trans": np.asarray(trans, np.float32),
                      "valid": valid, "keypoints_2d": keypoints,
-                     "reprojection_error_px": np.where(valid, errors, 0.0).astype(np.float32)}
+                     "reprojection_error_px": np.where(valid, errors, 0.0).astype(np.float32)} | pinhole

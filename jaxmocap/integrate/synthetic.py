@@ -1,5 +1,6 @@
 """Synthetic fitting problems with known answers (tests and benchmarks): random plausible whole-body poses,
-projected with a known weak-perspective camera, with pixel noise and dropped keypoints, and a perturbed start."""
+projected with a known weak-perspective camera (or a pinhole one, the body placed by ``transl``), with pixel noise
+and dropped keypoints, and a perturbed start."""
 
 from __future__ import annotations
 
@@ -16,8 +17,8 @@ IMAGE_SIZE = (1000, 1000)
 
 class Synthetic(NamedTuple):
     truth: SMPLXParams  # (T,)
-    camera_scale: np.ndarray  # (T,)
-    camera_trans: np.ndarray  # (T, 2)
+    camera_scale: np.ndarray  # (T,) (pinhole: focal length / the body origin's depth)
+    camera_trans: np.ndarray  # (T, 2) (pinhole: where the body origin's pixel is)
     clean: np.ndarray  # (T, 67, 2) exact projections
     keypoints: np.ndarray  # (T, 67, 3) noisy, some dropped (confidence 0)
     init: SMPLXParams  # (T,) perturbed truth
@@ -65,14 +66,22 @@ def openpose_projection(model: BodyModel, params: SMPLXParams, scale, trans) -> 
 
 
 def make_problem(model: BodyModel, t: int, seed: int = 0, noise_px: float = 2.0, drop: float = 0.15,
-                 perturb: float = 1.0) -> Synthetic:
+                 perturb: float = 1.0, focal_length: float | None = None) -> Synthetic:
+    """``t`` frames; through a pinhole camera of ``focal_length`` (principal point the image centre) when given."""
     rng = np.random.default_rng(seed)
     theta = random_pose(rng, t)
     betas = rng.normal(0, 1.0, (t, model.num_betas)).astype(np.float32)
     scale = rng.uniform(300, 450, t).astype(np.float32)
-    trans = (np.array(IMAGE_SIZE, np.float32) / 2 + rng.normal(0, 30, (t, 2))).astype(np.float32)
+    centre = np.array(IMAGE_SIZE, np.float32) / 2
+    trans = (centre + rng.normal(0, 30, (t, 2))).astype(np.float32)
     truth = _params(theta, betas, model.num_expression)
-    clean = openpose_projection(model, truth, scale, trans)
+    if focal_length is None:
+        clean = openpose_projection(model, truth, scale, trans)
+    else:
+        truth = truth.replace(transl=jnp.asarray(np.concatenate([(trans - centre) / scale[:, None],
+                                                                 focal_length / scale[:, None]], 1)))
+        joints = np.asarray(_JOINTS(model, truth))[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
+        clean = focal_length * joints[..., :2] / joints[..., 2:] + centre
     keypoints = np.concatenate([clean + rng.normal(0, noise_px, clean.shape), np.ones(clean.shape[:2] + (1,))], -1)
     keypoints[rng.uniform(size=clean.shape[:2]) < drop] = 0.0
     init_theta = theta.copy()

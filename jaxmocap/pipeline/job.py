@@ -24,7 +24,8 @@ from jaxmocap.detect import Detector
 from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.errors import InputError
 from jaxmocap.export.frankmocap import write_frankmocap_pkls
-from jaxmocap.integrate import body_from_blazepose, fit, fitted_motion, hand_into_body
+from jaxmocap.integrate import FitConfig, body_from_blazepose, fit, fitted_motion, hand_into_body
+from jaxmocap.integrate.camera import default_focal_length
 from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.folder import read_keypoint_folder
 from jaxmocap.io import file_sha256
@@ -35,7 +36,7 @@ from jaxmocap.pipeline.observe import Observations, observe
 from jaxmocap.pipeline.outputs import EXPORT_FILES, write_exports, write_overlay
 from jaxmocap.pipeline.regress import Regression, solve_regressors
 
-SETTINGS_VERSION = 2
+SETTINGS_VERSION = 3
 
 
 @dataclass
@@ -59,18 +60,41 @@ def initial_bodies(model, obs: Observations) -> smplx_jax.SMPLXParams:
     return params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression)
 
 
-def _solve(model, obs, iterations, seconds):
+# The fit from the IK start: the start already holds BlazePose's 3D (depth, twists) that the 2D keypoints do not see,
+# so the prior keeps the fit near it (0.1 m/rad; the generic fit's 0.02 lets depth drift: 3D error +10 mm on real
+# footage, `bench/accuracy.py`).
+FIT_FROM_IK = FitConfig(prior_body=0.1)
+
+
+def fitted_bodies(model, obs: Observations, init: smplx_jax.SMPLXParams, image_size, iterations: int = 20,
+                  focal_length: float | None = None):
+    """The fit of each frame to its 2D keypoints from the IK start (`FitResult`; before temporal smoothing), through
+    a pinhole camera of ``focal_length`` pixels (default `default_focal_length`) centred on the image of
+    ``image_size`` (width, height)."""
+    focal_length, principal_point = _lens(image_size, focal_length)
+    return fit(model, obs.keypoints, init=init, focal_length=focal_length, principal_point=principal_point,
+               iterations=iterations, config=FIT_FROM_IK)
+
+
+def _lens(image_size, focal_length=None):
+    return focal_length or default_focal_length(image_size), np.asarray(image_size, np.float32) / 2
+
+
+def _solve(model, obs, image_size, iterations, focal_length, seconds):
     """IK from the 3D landmarks, then the fit to the 2D keypoints, for one chunk of frames."""
     t0 = time.perf_counter()
     init = jax.block_until_ready(initial_bodies(model, obs))
     t1 = time.perf_counter()
-    result = fit(model, obs.keypoints, init=init, iterations=iterations)
+    result = fitted_bodies(model, obs, init, image_size, iterations, focal_length)
     jax.block_until_ready(result)
     seconds["ik"] += t1 - t0
     seconds["fit"] += time.perf_counter() - t1
     arrays = {k: np.asarray(v) for k, v in vars(result.params).items()}
+    focal, center = _lens(image_size, focal_length)
+    n = len(obs.found)
     return arrays | {"camera_scale": np.asarray(result.camera_scale), "camera_trans": np.asarray(result.camera_trans),
-                     "valid": obs.found & np.asarray(result.valid)}
+                     "valid": obs.found & np.asarray(result.valid), "focal_length": np.full(n, focal, np.float32),
+                     "principal_point": np.tile(center, (n, 1))}
 
 
 def _keypoints_by_frame(folder) -> dict[int, np.ndarray]:
@@ -83,8 +107,8 @@ def _keypoints_by_frame(folder) -> dict[int, np.ndarray]:
 
 
 def run(source, out_dir, *, model_path=None, weights=None, integration: str = "optimize", keypoints_dir=None,
-        start: int = 0,
-        end: int | None = None, stride: int = 1, chunk_size: int = 128, iterations: int = 20, smooth: bool = True,
+        start: int = 0, end: int | None = None, stride: int = 1, chunk_size: int = 128, iterations: int = 20,
+        focal_length: float | None = None, smooth: bool = True,
         overlay: bool = True, exports: tuple[str, ...] = (), progress: bool = True, hand_boxes: str = "keypoints",
         frankmocap_pkl: bool = False) -> RunReport:
     """Run over ``source`` and write ``out_dir/motion.npz`` (DESIGN 2.3), the detections as OpenPose JSON in
@@ -94,13 +118,16 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
     ``integration="optimize"``, the fit. ``keypoints_dir``: OpenPose JSON (e.g. from OpenPose itself) to fit to
     instead of the detector's 2D keypoints. ``hand_boxes="body"`` (with ``weights``): hand boxes from the body
     regressor's projected hands and the detector's pose alone (FrankMocap's fast mode). ``frankmocap_pkl``: also
-    FrankMocap's per-frame prediction pickles in ``out_dir/mocap/``."""
+    FrankMocap's per-frame prediction pickles in ``out_dir/mocap/``. ``focal_length``: the camera's, in pixels
+    (default `default_focal_length`: a phone's main camera)."""
     from tqdm import tqdm
 
     if integration not in ("optimize", "copy-paste", "eft"):
         raise InputError(f"unknown integration {integration!r} (optimize, copy-paste or eft)")
     if integration in ("copy-paste", "eft") and weights is None:
         raise InputError(f"--integration {integration} needs --weights (the regressors); the default path optimizes")
+    if focal_length is not None and not focal_length > 0:
+        raise InputError(f"--focal-length must be positive, got {focal_length}")
     if hand_boxes not in ("keypoints", "body"):
         raise InputError(f"unknown hand boxes {hand_boxes!r} (keypoints or body)")
     if hand_boxes == "body" and weights is None:
@@ -119,7 +146,8 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
     still = media.kind in ("image", "images")
     source_id = str(Path(source).resolve()) if not str(source).isdigit() else str(source)
     store = ChunkStore(out_dir, dict(version=SETTINGS_VERSION, source=source_id, start=start, end=end, stride=stride,
-                                     chunk=chunk_size, iterations=iterations, model=model_sha,
+                                     chunk=chunk_size, iterations=iterations, focal_length=focal_length,
+                                     model=model_sha,
                                      weights=weights and file_sha256(Path(weights) / "regressors.json"),
                                      integration=integration, hand_boxes=hand_boxes,
                                      keypoints=keypoints_dir and str(Path(keypoints_dir).resolve())))
@@ -146,7 +174,7 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
                 obs = dataclasses.replace(obs, keypoints=np.stack([given.get(i, np.zeros((67, 3))) for i in ids]))
             seconds["detect"] += time.perf_counter() - t0
             if regression is None:
-                solved = _solve(model, obs, iterations, seconds)
+                solved = _solve(model, obs, media.size, iterations, focal_length, seconds)
             else:
                 t0 = time.perf_counter()
                 solved = solve_regressors(model, regression, [frame for _, frame in batch], obs, integration,
@@ -206,5 +234,6 @@ def _assemble(model, chunks, smooth):
     params = smplx_jax.SMPLXParams(**{k: jnp.asarray(cat[k]) for k in (
         "global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "leye_pose", "reye_pose",
         "betas", "expression", "transl")})
+    lens = (cat["focal_length"][0], cat["principal_point"][0]) if "focal_length" in cat else (None, None)
     return fitted_motion(model, params, cat["camera_scale"], cat["camera_trans"], cat["valid"], cat["keypoints_2d"],
-                         smooth)
+                         smooth, *lens)

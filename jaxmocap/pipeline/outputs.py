@@ -9,8 +9,8 @@ from tqdm import tqdm
 import smplx_jax
 from jaxmocap.export import animation, write_bvh, write_gltf
 from jaxmocap.media import open_media
-from jaxmocap.motion import motion_params
-from jaxmocap.overlay import OverlayWriter
+from jaxmocap.motion import lens, motion_params
+from jaxmocap.overlay import OverlayWriter, body_up
 
 EXPORT_FILES = {"bvh": "motion.bvh", "gltf": "motion.glb"}
 _VERTICES = jax.jit(jax.vmap(lambda model, params: smplx_jax.forward(model, params).vertices, in_axes=(None, 0)))
@@ -24,7 +24,8 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motion: dict, source, 
     faces = np.asarray(model.faces)
     valid = motion["valid"]
     total = len(valid)
-    with OverlayWriter(path, media.size, media.fps) as writer:
+    up = body_up(motion["global_orient"][valid]) if valid.any() else None
+    with OverlayWriter(path, media.size, media.fps, lens=lens(motion), up=up) as writer:
         bar = tqdm(total=total, unit="frame", desc="overlay", disable=not progress)
         done = 0
         while done < total:

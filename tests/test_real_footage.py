@@ -1,0 +1,37 @@
+"""Real footage with a 3D reference: 20 frames of Pose2Sim's oblique view from above and behind (`cam03`), run as a
+user runs it and scored as `bench/accuracy.py` scores it (DESIGN 2.5), beside BlazePose's own monocular 3D."""
+
+import pytest
+
+from bench import accuracy
+
+FRAMES = 20
+
+
+@pytest.fixture(scope="module")
+def scored(tmp_path_factory):
+    stages = accuracy.run_stages(accuracy.VIEWS["cam03"], tmp_path_factory.mktemp("cam03"), end=FRAMES)
+    reference = accuracy.load_reference()[:FRAMES]
+    return accuracy.report_view("cam03", stages, reference)
+
+
+def test_the_fit_sits_on_the_person(scored):
+    motion = scored["motion"]
+    assert motion["valid_share"] >= 0.95
+    assert motion["reprojection_median_px"] <= 12.0, motion["reprojection_median_px"]
+    assert motion["reprojection_over_40px"] <= 0.05
+
+
+def test_rotations_are_coherent_over_time(scored):
+    """No twist flips between frames 1/60 s apart, before smoothing (IK start and fit) and after."""
+    for stage in ("ik", "fit", "motion"):
+        assert scored[stage]["rotation_change_median_deg"] <= 5.0, (stage, scored[stage])
+        assert scored[stage]["rotation_change_over_45deg"] <= 0.01, (stage, scored[stage])
+
+
+def test_3d_against_the_blazepose_landmarks_it_starts_from(scored):
+    blazepose, motion = scored["blazepose"], scored["motion"]
+    assert motion["frames_scored"] >= 15
+    assert motion["accel_error_mm"] <= blazepose["accel_error_mm"], (motion, blazepose)
+    assert motion["flexion_mae_deg"] <= blazepose["flexion_mae_deg"], (motion, blazepose)
+    assert motion["pa_mpjpe_mm"] <= 0.8 * blazepose["pa_mpjpe_mm"], (motion, blazepose)
