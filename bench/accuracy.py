@@ -9,7 +9,8 @@ Metrics, per frame where the reference has at least 8 of its 12 limb joints (L/R
 ankle): PA-MPJPE (mm, after the best similarity transform of that frame), knee and elbow flexion MAE (degrees,
 alignment-free), acceleration error (mm/frame^2, second differences of the aligned joints against the reference's,
 over three consecutive scored frames); for the motion: frames valid, median and > 40 px share of the 2D
-reprojection error, and the frame-to-frame change of the stored rotations (global and body joints, at 60 fps).
+reprojection error, the frame-to-frame change of the stored rotations (global and body joints, at 60 fps), and the
+share of finger joints bent backwards by more than 10 degrees.
 """
 
 from __future__ import annotations
@@ -103,6 +104,17 @@ def rotation_coherence(motion: dict) -> dict:
                 rotation_change_over_45deg=float(np.mean(changes > 45)))
 
 
+def fingers_bent_backwards(motion: dict, tolerance_deg: float = 10.0) -> float:
+    """The share of finger joint-frames (index to ring, both hands, valid frames) bent backwards, against their
+    flexion, by more than ``tolerance_deg``."""
+    from jaxmocap.integrate.least_squares import BEND_LIMITS
+
+    hands = np.concatenate([motion["left_hand_pose"], motion["right_hand_pose"]], 1)[np.asarray(motion["valid"])]
+    limits = [(j - 25, axis, sign) for j, axis, sign in BEND_LIMITS if j >= 25]
+    backwards = np.stack([sign * hands[:, j, axis] for j, axis, sign in limits], 1)
+    return float(np.mean(np.degrees(backwards) > tolerance_deg))
+
+
 @dataclass
 class Stages:
     """One view's per-frame results: BlazePose's limb landmarks, the IK start, the fit, the smoothed motion."""
@@ -162,7 +174,7 @@ def report_view(name: str, stages: Stages, reference: np.ndarray) -> dict:
                                                                     for v in per_frame]}
         if stage != "blazepose":
             motion = getattr(stages, stage)
-            rows[stage] |= rotation_coherence(motion)
+            rows[stage] |= rotation_coherence(motion) | dict(fingers_backwards=fingers_bent_backwards(motion))
             if stage != "ik":
                 errors = np.asarray(motion["reprojection_error_px"])[np.asarray(motion["valid"])]
                 rows[stage] |= dict(valid_share=float(np.mean(motion["valid"])),
@@ -235,14 +247,14 @@ def main():
 
     print(f"\naccuracy on real footage (Pose2Sim single-person take), {platform.machine()}")
     print(f"{'view':>6} {'stage':>10} {'frames':>6} {'PA-MPJPE mm':>11} {'flex MAE':>9} {'accel':>7} "
-          f"{'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7}")
+          f"{'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7} {'fingers back':>12}")
     for name, rows in results.items():
         for stage in ("blazepose", "ik", "fit", "motion"):
             r = rows[stage]
             extra = (f"{r['reprojection_median_px']:>9.1f} {100 * r['reprojection_over_40px']:>5.0f}% "
                      f"{100 * r['valid_share']:>5.0f}%" if "valid_share" in r else f"{'':>9} {'':>6} {'':>6}")
-            coherence = (f"{r['rotation_change_median_deg']:>7.1f}° {100 * r['rotation_change_over_45deg']:>6.1f}%"
-                         if "rotation_change_median_deg" in r else "")
+            coherence = (f"{r['rotation_change_median_deg']:>7.1f}° {100 * r['rotation_change_over_45deg']:>6.1f}% "
+                         f"{100 * r['fingers_backwards']:>11.1f}%" if "rotation_change_median_deg" in r else "")
             print(f"{name:>6} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
                   f"{r['flexion_mae_deg']:>8.1f}° {r['accel_error_mm']:>7.1f} {extra} {coherence}")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -1,7 +1,8 @@
 """Optimization integration speed: frames/s of the 20-iteration fit (`jaxmocap.integrate.fit`, optimistix) over 256
 and 1024 frames and its final reprojection error, against a PyTorch baseline on the same objective, data, start and
-threads: the ``smplx`` package + ``torch.optim.LBFGS`` (strong Wolfe line search, 20 iterations) and Adam (20 steps);
-and against the hand-written Levenberg-Marquardt it replaced (``bench/_reference_lm.py``), same data and start.
+threads: the ``smplx`` package + ``torch.optim.LBFGS`` (strong Wolfe line search, 20 iterations) and Adam (20 steps).
+(The comparison with the hand-written Levenberg-Marquardt that the optimistix fit replaced is in docs/BENCHMARKS.md,
+measured by this script at commit 990c816.)
 
     python bench/fit.py [--out bench/results] [--quick]      (or: jaxmocap bench --only fit)
 
@@ -17,7 +18,6 @@ import argparse
 import json
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 
@@ -61,9 +61,10 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
         data = (conf * sigma2[:, None] * torch.log1p(r2 / sigma2[:, None])).sum(1)
         reg = sum((s0 * w) ** 2 * ((var[k] - start[k]) ** 2).sum(1) for k, w in prior.items())
         reg = reg + (s0 * config.prior_betas) ** 2 * (var["betas"] ** 2).sum(1)
-        pose = var["body_pose"].reshape(b, 21, 3)
+        pose = torch.cat([var["global_orient"], var["body_pose"], jaw, jaw, jaw, var["left_hand_pose"],
+                          var["right_hand_pose"]], 1).reshape(b, 55, 3)  # SMPL-X's joint order
         for j, c, sign in BEND_LIMITS:
-            reg = reg + (s0 * config.prior_bend) ** 2 * torch.relu(sign * pose[:, j - 1, c]) ** 2
+            reg = reg + (s0 * config.prior_bend) ** 2 * torch.relu(sign * pose[:, j, c]) ** 2
         return (0.5 * (data + reg) / s0**2).sum()
 
     params = list(var.values()) + [log_s, d_t]
@@ -107,8 +108,6 @@ def main():
     import torch
 
     import smplx_jax
-    sys.path.insert(0, str(Path(__file__).parent))
-    import _reference_lm as reference_lm
     from jaxmocap.integrate import fitting, reprojection_errors, synthetic
     from jaxmocap.integrate.camera import weak_perspective_from_points
     from jaxmocap.integrate.keypoints import keypoints_cm
@@ -134,32 +133,18 @@ def main():
         err = lambda p, s, t: float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))  # noqa: E731
         run = lambda: jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0],  # noqa
                                                         cam0[:, 1:], iterations=iterations))
-        pose0 = np.asarray(fitting.full_pose_of(problem.init))
-        run_reference = lambda: reference_lm.fit_reference(model, problem.keypoints, pose0,  # noqa: E731
-                                                           np.asarray(problem.init.betas), cam0, config)
-        first = {}
-        for name, fn in (("jax", run), ("reference", run_reference)):
-            begin = time.perf_counter()
-            fn()
-            first[name] = time.perf_counter() - begin
-        times, reference_times = [], []
-        for _ in range(3 if args.quick else 5):  # interleaved, so that both see the same machine
+        begin = time.perf_counter()
+        run()
+        first_call = time.perf_counter() - begin
+        times = []
+        for _ in range(3 if args.quick else 5):
             begin = time.perf_counter()
             result = run()
             times.append(time.perf_counter() - begin)
-            begin = time.perf_counter()
-            reference = run_reference()
-            reference_times.append(time.perf_counter() - begin)
         seconds = min(times)
-        reference_params = fitting.params_from_full_pose(jnp.asarray(reference[0]), jnp.asarray(reference[1]),
-                                                         model.num_expression)
         row = dict(frames=frames, iterations=iterations, jax_seconds=seconds, jax_fps=frames / seconds,
-                   jax_first_call_seconds=first["jax"],
-                   start_error_px=err(problem.init, cam0[:, 0], cam0[:, 1:]),
-                   jax_error_px=err(result.params, result.camera_scale, result.camera_trans),
-                   reference_lm_fps=frames / min(reference_times), reference_lm_first_call_seconds=first["reference"],
-                   reference_lm_error_px=err(reference_params, reference[2][:, 0], reference[2][:, 1:]),
-                   ratio_vs_reference_lm=min(reference_times) / seconds)
+                   jax_first_call_seconds=first_call, start_error_px=err(problem.init, cam0[:, 0], cam0[:, 1:]),
+                   jax_error_px=err(result.params, result.camera_scale, result.camera_trans))
         if not (args.quick and frames > 256):
             for method in ("lbfgs", "adam"):
                 secs, params, s, t = torch_fit(path.parent.parent, problem, cam0, config, method, iterations, threads)
@@ -171,15 +156,14 @@ def main():
 
     print(f"\nfit ({iterations} iterations), float32, {threads} threads, {platform.processor() or platform.machine()}, "
           f"jax {jax.__version__}, torch {torch.__version__}; median final reprojection error in px")
-    print(f"{'frames':>6} {'start px':>9} {'jax fps':>9} {'jax px':>7} {'old LM fps':>10} {'old px':>7} {'ratio':>6} "
-          f"{'LBFGS fps':>10} {'LBFGS px':>9} {'ratio':>7} {'Adam fps':>9} {'Adam px':>8} {'ratio':>7}")
+    print(f"{'frames':>6} {'start px':>9} {'jax fps':>9} {'jax px':>7} {'LBFGS fps':>10} {'LBFGS px':>9} "
+          f"{'ratio':>7} {'Adam fps':>9} {'Adam px':>8} {'ratio':>7}")
     for r in rows:
         torch_cols = (f"{r['torch_lbfgs_fps']:>10.1f} {r['torch_lbfgs_error_px']:>9.2f} "
                       f"{r['speedup_vs_lbfgs']:>6.1f}x "
                       f"{r['torch_adam_fps']:>9.1f} {r['torch_adam_error_px']:>8.2f} {r['speedup_vs_adam']:>6.1f}x"
                       if "torch_lbfgs_fps" in r else f"{'-':>10} {'-':>9} {'-':>7} {'-':>9} {'-':>8} {'-':>7}")
         print(f"{r['frames']:>6} {r['start_error_px']:>9.2f} {r['jax_fps']:>9.1f} {r['jax_error_px']:>7.2f} "
-              f"{r['reference_lm_fps']:>10.1f} {r['reference_lm_error_px']:>7.2f} {r['ratio_vs_reference_lm']:>5.2f}x "
               f"{torch_cols}")
     args.out.mkdir(parents=True, exist_ok=True)
     result = dict(benchmark="fit", threads=threads, machine=platform.machine(), jax=jax.__version__,

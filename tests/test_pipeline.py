@@ -16,6 +16,8 @@ import jaxmocap.pipeline.job as pipeline_run
 import smplx_jax
 from jaxmocap.cli import main
 from jaxmocap.io import file_sha256
+from jaxmocap.pipeline import Observations
+from jaxmocap.pipeline.observe import fill_hand_gaps
 from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from smplx_jax import constants
 
@@ -46,7 +48,8 @@ def test_motion_schema_and_conventions(result):
 
 def test_smplx_pytorch_reproduces_the_stored_projections(result):
     """The motion loaded into the PyTorch smplx package, through the stored pinhole camera, gives the stored errors;
-    the stored weak-perspective camera is its approximation, a few pixels off."""
+    the stored weak-perspective camera is its approximation (at ~2.5 m, parts nearer or farther than the body's
+    centre are tens of pixels off)."""
     out, _ = result
     motion = read_motion(out / "motion.npz")
     joints = smplx_joints(motion)[:, constants.OPENPOSE67_FROM_SMPLX]
@@ -59,7 +62,7 @@ def test_smplx_pytorch_reproduces_the_stored_projections(result):
     dist = np.where(seen, np.linalg.norm(pixels - keypoints[..., :2], axis=-1), 0).sum(1) / seen.sum(1)
     np.testing.assert_allclose(dist, motion["reprojection_error_px"], atol=0.01)
     weak = motion["camera_scale"][:, None, None] * joints[..., :2] + motion["camera_trans"][:, None]
-    assert np.median(np.linalg.norm(weak - pixels, axis=-1)[seen]) < 15.0
+    assert np.median(np.linalg.norm(weak - pixels, axis=-1)[seen]) < 40.0
 
 
 def frankmocap_to_image(points, scale, trans, ratio, top_left, trans_first=False):
@@ -269,3 +272,26 @@ def test_given_keypoints_replace_the_detectors(result, tmp_path):
     np.testing.assert_allclose(shifted["keypoints_2d"][..., 0][seen], original["keypoints_2d"][..., 0][seen] + 30,
                                atol=1e-2)
     assert np.median(shifted["camera_trans"][:, 0] - original["camera_trans"][:, 0]) > 20
+
+
+def test_a_hand_lost_for_a_short_gap_is_interpolated():
+    n = 20
+    hands_conf = np.zeros((n, 2))
+    hands_conf[[0, 4, 15], 0] = 1.0  # left: a gap of 3 frames, then one of 10
+    hands_conf[[6, 10], 1] = 1.0  # right: a gap of 3 frames without the person in one
+    keypoints = np.zeros((n, 67, 3))
+    keypoints[[0, 4, 15], 25:46] = [[10.0, 20.0, 0.9]], [[50.0, 60.0, 0.5]], [[0.0, 0.0, 1.0]]
+    keypoints[4, 30, 2] = 0.0  # one keypoint unseen at the gap's end
+    hands_world = np.zeros((n, 2, 21, 3))
+    hands_world[4, 0] = 0.04
+    found = np.ones(n, bool)
+    found[8] = False
+    obs = Observations(keypoints, np.zeros((n, 33, 4)), hands_world, hands_conf, np.zeros((n, 4)),
+                       np.zeros((n, 2, 4)), found)
+    filled = fill_hand_gaps(obs, max_gap=3)
+    np.testing.assert_allclose(filled.keypoints[1:4, 25], [[20, 30, 0.8], [30, 40, 0.7], [40, 50, 0.6]])
+    np.testing.assert_allclose(filled.hands_world[1:4, 0, 5], [[0.01] * 3, [0.02] * 3, [0.03] * 3])
+    np.testing.assert_allclose(filled.hands_conf[1:4, 0], 1.0)
+    assert np.all(filled.keypoints[1:4, 30] == 0)  # seen at one end only
+    assert np.all(filled.hands_conf[5:15, 0] == 0) and np.all(filled.keypoints[5:15] == 0)  # too long
+    assert np.all(filled.hands_conf[7:10, 1] == 0)  # the person was lost in between

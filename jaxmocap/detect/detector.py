@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
-from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, pose_hand_roi
+from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models
 from .pose import PoseEstimator, PoseResult, landmark_box, rect_iou
 
@@ -61,10 +61,6 @@ def as_bgr(image: np.ndarray) -> np.ndarray:
 class _Track:
     pose: PoseResult
     hands: dict  # side -> HandResult | None
-    wait: dict = None  # side -> frames to wait before seeding a lost hand from the body again
-
-    def __post_init__(self):
-        self.wait = self.wait or {s: 0 for s in SIDES}
 
 
 class Detector:
@@ -72,15 +68,15 @@ class Detector:
 
     ``static_image_mode=True`` treats every call as an unrelated image (person and palm detectors each time);
     ``False`` tracks: the next ROIs come from the previous frame's landmarks, the person detector runs only when
-    a track is lost (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked), and a lost
-    hand is searched for (every ``hand_retry_every`` frames) in the ROI given by the body's wrist, pinky and index,
-    as mediapipe's holistic does.
+    a track is lost (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked), and each
+    hand comes, as in mediapipe's holistic, from the ROI that the body's wrist, pinky and index give, refined by
+    the recrop model, or from the previous frame's hand while that stays close to it.
     Model files: see ``jaxmocap.detect.models`` (``model_dir`` or ``$JAXMOCAP_MEDIAPIPE_DIR`` to use a copy).
     """
 
     def __init__(self, static_image_mode: bool = True, max_people: int = 1, hands: bool = True,
                  model_dir=None, num_threads: int = 2, min_detection_confidence: float = 0.5,
-                 min_tracking_confidence: float = 0.5, redetect_every: int = 15, hand_retry_every: int = 2):
+                 min_tracking_confidence: float = 0.5, redetect_every: int = 15):
         if max_people < 1:
             raise ValueError(f"max_people must be >= 1, got {max_people}")
         paths = ensure_models(model_dir)
@@ -90,10 +86,9 @@ class Detector:
         self.min_detection_confidence = min_detection_confidence
         self.min_tracking_confidence = min_tracking_confidence
         self.redetect_every = redetect_every
-        self.hand_retry_every = max(1, hand_retry_every)
         self._pose = PoseEstimator(paths["pose_detection.tflite"], paths["pose_landmark_full.tflite"], num_threads)
         self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
-                                    num_threads)
+                                    paths["hand_recrop.tflite"], num_threads)
         self._tracks: list[_Track] = []
         self._frame = 0
 
@@ -125,24 +120,34 @@ class Detector:
             result = self._pose.landmarks(image, track.pose.next_roi, self.min_tracking_confidence)
             if result is None or any(rect_iou(result.next_roi, t.pose.next_roi) > 0.5 for t in tracks):
                 continue
-            tracks.append(_Track(result, track.hands, track.wait))
+            tracks.append(_Track(result, track.hands))
         if not tracks or (len(tracks) < self.max_people and self._frame % self.redetect_every == 0):
             new = self._detect_people(image, [t.pose for t in tracks])
             tracks += [_Track(p, {s: None for s in SIDES}) for p in new]
         return tracks
 
     # -- hands ------------------------------------------------------------------------------------------------
-    def _seed_hand(self, image: np.ndarray, pose: PoseResult, side: str, refine: bool) -> HandResult | None:
-        wrist = POSE_HAND_POINTS[side][0]
-        if pose.landmarks[wrist, 3] < 0.1:  # holistic's wrist-visibility gate
+    def _hand_from_pose(self, image: np.ndarray, pose: PoseResult, side: str, previous: HandResult | None
+                        ) -> HandResult | None:
+        """Holistic's hand: the recrop ROI from the pose, or the previous hand's ROI while it stays close."""
+        if pose.landmarks[POSE_HAND_POINTS[side][0], 3] <= 0.1:  # holistic's wrist-visibility gate
             return None
         size = (image.shape[1], image.shape[0])
-        hand = self._hands.landmarks(image, pose_hand_roi(pose.landmarks, side, size), MIN_HAND_PRESENCE)
-        if hand is not None and refine:
-            hand = self._hands.landmarks(image, hand.next_roi, MIN_HAND_PRESENCE) or hand
-        if hand is None or not self._plausible(hand, pose, side, size):
-            return None
+        recrop = self._hands.recrop_roi(image, pose_hand_roi(pose.landmarks, side, size))
+        keep = previous is not None and keeps_tracking(previous, recrop, size)
+        hand = self._hands.landmarks(image, previous.next_roi if keep else recrop, MIN_HAND_PRESENCE)
+        if hand is None and previous is not None and not keep:  # the recrop missed: try where the hand was
+            hand = self._hands.landmarks(image, previous.next_roi, MIN_HAND_PRESENCE)
+            hand = hand if hand is not None and self._plausible(hand, pose, side, size) else None
         return hand
+
+    def _seed_hand(self, image: np.ndarray, pose: PoseResult, side: str) -> HandResult | None:
+        """A hand from the pose in a still image: holistic's, refined once from its own landmarks."""
+        hand = self._hand_from_pose(image, pose, side, None)
+        if hand is not None:
+            hand = self._hands.landmarks(image, hand.next_roi, MIN_HAND_PRESENCE) or hand
+        size = (image.shape[1], image.shape[0])
+        return hand if hand is not None and self._plausible(hand, pose, side, size) else None
 
     @staticmethod
     def _wrist_cost(hand: HandResult, pose: PoseResult, side: str, size) -> float:
@@ -173,28 +178,16 @@ class Detector:
             used.add(i)
 
     def _update_hands(self, image: np.ndarray, tracks: list[_Track]) -> None:
-        size = (image.shape[1], image.shape[0])
         if self.static_image_mode:
             self._assign_palms(image, tracks)
             for t in tracks:
                 for side in SIDES:
                     if t.hands[side] is None:
-                        t.hands[side] = self._seed_hand(image, t.pose, side, refine=True)
+                        t.hands[side] = self._seed_hand(image, t.pose, side)
             return
         for t in tracks:
             for side in SIDES:
-                prev = t.hands[side]
-                hand = None
-                if prev is not None:
-                    hand = self._hands.landmarks(image, prev.next_roi, self.min_tracking_confidence)
-                    if hand is not None and not self._plausible(hand, t.pose, side, size):
-                        hand = None
-                if hand is None and t.wait[side] <= 0:
-                    hand = self._seed_hand(image, t.pose, side, refine=False)
-                    t.wait[side] = 0 if hand is not None else self.hand_retry_every - 1
-                elif hand is None:
-                    t.wait[side] -= 1
-                t.hands[side] = hand
+                t.hands[side] = self._hand_from_pose(image, t.pose, side, t.hands[side])
 
     # -- public -----------------------------------------------------------------------------------------------
     def __call__(self, image_bgr: np.ndarray) -> list[Person]:

@@ -5,7 +5,11 @@ Palm detector (``PalmDetectionCpu``): whole image letterboxed to 192, values in 
 shift -0.5 along y, ×2.6, square long. Landmarks (``HandLandmarkCpu``): ROI warped to 224, values in [0, 1],
 replicated border; 21 × (x, y, z) with z / 0.4, presence ≥ 0.5, handedness, world landmarks. Tracking
 (``HandLandmarkLandmarksToRoi``): landmarks 0,1,2,3,5,6,9,10,13,14,17,18 give a rotated box, shift -0.1, ×2.0.
-Pose seeding (as holistic does, without its recrop model): wrist, pinky and index of the body give the ROI.
+From the pose, as holistic does (``HandLandmarksFromPoseCpu``): wrist, pinky and index of the body give a ROI
+(×2.7, shift -0.1), its recrop model (256, values in [0, 1], replicated border) a centre and a scale point for a
+better one (-90 degrees, shift -0.1, ×1), which replaces the tracked ROI unless that one is close to it
+(``RoiTrackingCalculator``: rotation within 40 degrees, centre within 0.2 and size within 0.4 of its size, the
+previous landmarks inside it shrunk by 0.1).
 """
 
 from __future__ import annotations
@@ -16,11 +20,13 @@ from typing import NamedTuple
 import numpy as np
 
 from .models import TFLiteModel
-from .roi import Rect, box_rect, crop, project, rotate_world, rotation_between, transform_rect
+from .roi import (Rect, alignment_rect, box_rect, crop, normalize_radians, project, rotate_world, rotation_between,
+                  transform_rect)
 from .ssd import Detection, decode, remove_letterbox, ssd_anchor_centers, weighted_nms
 
 PALM_SIZE = 192
 LANDMARK_SIZE = 224
+RECROP_SIZE = 256
 MIN_PALM_SCORE = 0.5
 MIN_PRESENCE = 0.5
 _PARTIAL = [0, 1, 2, 3, 5, 6, 9, 10, 13, 14, 17, 18]
@@ -69,12 +75,38 @@ def pose_hand_roi(body: np.ndarray, side: str, image_size: tuple[int, int], scal
     return transform_rect(rect, image_size, scale, shift_y=-0.1)
 
 
-class HandEstimator:
-    """Palm detector + hand landmark model."""
+def _in_rect_frame(points: np.ndarray, rect: Rect, image_size: tuple[int, int]) -> np.ndarray:
+    """Normalized points (N, >=2) in pixels relative to the rect's centre, along its rotated axes."""
+    w, h = image_size
+    d = (points[:, :2] - (rect.x_center, rect.y_center)) * (w, h)
+    c, s = math.cos(rect.rotation), math.sin(rect.rotation)
+    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
 
-    def __init__(self, palm_path, landmark_path, num_threads: int = 2):
+
+def keeps_tracking(previous: HandResult, recrop: Rect, image_size: tuple[int, int]) -> bool:
+    """Whether the previous frame's tracking ROI stays (holistic's ``RoiTrackingCalculator``) instead of the
+    recrop ROI: close to it in rotation, centre and size, and the previous landmarks well inside it."""
+    w, h = image_size
+    rect = previous.next_roi
+    if abs(math.degrees(normalize_radians(rect.rotation - recrop.rotation))) > 40.0:
+        return False
+    rw, rh = recrop.width * w, recrop.height * h
+    dx, dy = np.abs(_in_rect_frame(np.array([[rect.x_center, rect.y_center]]), recrop, image_size)[0])
+    if dx > 0.2 * rw or dy > 0.2 * rh:
+        return False
+    if abs(rect.width * w - rw) > 0.4 * rw or abs(rect.height * h - rh) > 0.4 * rh:
+        return False
+    inside = np.abs(_in_rect_frame(previous.landmarks, recrop, image_size)) < 0.5 * (1 - 0.1) * np.array([rw, rh])
+    return bool(inside.all())
+
+
+class HandEstimator:
+    """Palm detector, hand landmark model and holistic's hand recrop model."""
+
+    def __init__(self, palm_path, landmark_path, recrop_path, num_threads: int = 2):
         self._palm = TFLiteModel(palm_path, num_threads)
         self._landmarker = TFLiteModel(landmark_path, num_threads)
+        self._recrop = TFLiteModel(recrop_path, num_threads)
         self._anchors = ssd_anchor_centers(PALM_SIZE, [8, 16, 16, 16])
 
     def detect(self, image: np.ndarray, min_score: float = MIN_PALM_SCORE) -> list[Detection]:
@@ -89,6 +121,15 @@ class HandEstimator:
         """Hand ROI of a palm detection."""
         rect = box_rect(det.box, det.keypoints[0], det.keypoints[2], image_size)
         return transform_rect(rect, image_size, 2.6, shift_y=-0.5)
+
+    def recrop_roi(self, image: np.ndarray, roi: Rect) -> Rect:
+        """The hand ROI that the recrop model finds inside a pose-derived ``roi`` of a BGR image."""
+        size = (image.shape[1], image.shape[0])
+        tensor, padding = crop(image, roi, RECROP_SIZE, (0.0, 1.0), border_zero=False)
+        points = np.zeros((2, 3))
+        points[:, :2] = self._recrop(tensor)[0].reshape(2, 2) / RECROP_SIZE
+        centre, scale_point = project(points, roi, padding)[:, :2]
+        return transform_rect(alignment_rect(centre, scale_point, size, -90.0), size, 1.0, shift_y=-0.1)
 
     def landmarks(self, image: np.ndarray, roi: Rect, min_presence: float = MIN_PRESENCE) -> HandResult | None:
         """The hand inside ``roi`` of a BGR image, or None when the model finds none."""

@@ -1,9 +1,9 @@
-"""The four BlazePose / hand ``.tflite`` files: fetch from the official wheel, verify, cache, load.
+"""The BlazePose, hand and hand-recrop ``.tflite`` files: fetch from the official wheel, verify, cache, load.
 
 The files are Apache-2.0 and ship inside the official ``mediapipe==0.10.21`` wheel (the last release that bundles
 them). We download that wheel with pip (no install), extract the members, check their sha256 and cache them under
 ``$JAXMOCAP_CACHE/mediapipe-0.10.21/`` (default ``~/.cache/jaxmocap``). ``$JAXMOCAP_MEDIAPIPE_DIR`` (or the
-``model_dir`` argument) points at an existing folder holding the four files instead.
+``model_dir`` argument) points at an existing folder holding the five files instead.
 """
 
 from __future__ import annotations
@@ -39,6 +39,10 @@ MODEL_FILES: dict[str, tuple[str, str]] = {
     "hand_landmark_full.tflite": (
         "mediapipe/modules/hand_landmark/hand_landmark_full.tflite",
         "11c272b891e1a99ab034208e23937a8008388cf11ed2a9d776ed3d01d0ba00e3",
+    ),
+    "hand_recrop.tflite": (
+        "mediapipe/modules/holistic_landmark/hand_recrop.tflite",
+        "67d996ce96f9d36fe17d2693022c6da93168026ab2f028f9e2365398d8ac7d5d",
     ),
 }
 
@@ -119,7 +123,7 @@ def model_path(name: str, model_dir: str | os.PathLike | None = None) -> Path:
 
 
 def ensure_models(model_dir: str | os.PathLike | None = None) -> dict[str, Path]:
-    """All four verified model paths by file name."""
+    """All verified model paths by file name."""
     return {name: model_path(name, model_dir) for name in MODEL_FILES}
 
 

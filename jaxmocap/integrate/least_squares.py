@@ -39,9 +39,12 @@ from jaxmocap.integrate.descent import DampedNewtonCG, DampingSearch
 from jaxmocap.integrate import keypoints
 from jaxmocap.integrate.keypoints import KeypointModel, Linearization
 
-# One-sided bending limits (SMPLify-X's angle prior): (joint, axis component, sign): sign * theta[joint, axis] > 0
-# is hyper-extension. Elbows bend about y (left negative, right positive), knees about x (positive).
-BEND_LIMITS = ((18, 1, 1.0), (19, 1, -1.0), (4, 0, -1.0), (5, 0, -1.0))
+# One-sided bending limits (SMPLify-X's angle prior, and the fingers): (joint, axis component, sign): sign *
+# theta[joint, axis] > 0 is hyper-extension. Elbows bend about y (left negative, right positive), knees about x
+# (positive), the three joints of index, middle, pinky and ring fingers about z (left negative, right positive).
+FINGER_JOINTS = tuple(range(12))  # of each hand's 15: index, middle, pinky, ring; not the thumb
+BEND_LIMITS = ((18, 1, 1.0), (19, 1, -1.0), (4, 0, -1.0), (5, 0, -1.0)) + tuple(
+    (25 + k, 2, 1.0) for k in FINGER_JOINTS) + tuple((40 + k, 2, -1.0) for k in FINGER_JOINTS)
 _BEND_JOINT, _BEND_AXIS, _BEND_SIGN = (list(c) for c in zip(*BEND_LIMITS))  # lists: no cached constant dtypes
 
 
@@ -91,7 +94,7 @@ class Residuals(NamedTuple):
     data: Float[Array, "D K"]
     pose: Float[Array, "55 3"]
     betas: Float[Array, "B"]
-    bend: Float[Array, "4"]
+    bend: Float[Array, "L"]  # one per bending limit
 
 
 def _log1p_ratio(u):

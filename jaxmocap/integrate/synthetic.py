@@ -42,8 +42,9 @@ def random_pose(rng, t: int) -> np.ndarray:
     curl = rng.uniform(0.0, 1.2, (t, 2, 5, 1))  # per finger
     hands = rng.normal(0, 0.1, (t, 2, 15, 3))
     for side, sign in ((0, -1.0), (1, 1.0)):
-        for finger in range(4):  # index, middle, pinky, ring curl about z
-            hands[:, side, 3 * finger:3 * finger + 3, 2] += sign * curl[:, side, finger]
+        for finger in range(4):  # index, middle, pinky, ring curl about z, never backwards
+            joints = slice(3 * finger, 3 * finger + 3)
+            hands[:, side, joints, 2] = sign * (np.abs(hands[:, side, joints, 2]) + curl[:, side, finger])
         hands[:, side, 12:15, 1] += sign * 0.5 * curl[:, side, 4]
     theta[:, 25:40] = hands[:, 0]
     theta[:, 40:55] = hands[:, 1]

@@ -32,11 +32,12 @@ from jaxmocap.io import file_sha256
 from jaxmocap.media import open_media
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chunks import ChunkStore
-from jaxmocap.pipeline.observe import Observations, observe
+from jaxmocap.pipeline.observe import Observations, fill_hand_gaps, observe
 from jaxmocap.pipeline.outputs import EXPORT_FILES, write_exports, write_overlay
 from jaxmocap.pipeline.regress import Regression, solve_regressors
 
 SETTINGS_VERSION = 3
+HAND_GAP_SECONDS = 0.25  # a hand lost for at most this long is interpolated
 
 
 @dataclass
@@ -170,6 +171,8 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
             t0 = time.perf_counter()
             detector.reset()
             obs = observe(detector, [frame for _, frame in batch])
+            if not still:
+                obs = fill_hand_gaps(obs, round(HAND_GAP_SECONDS * media.fps))
             if given is not None:
                 obs = dataclasses.replace(obs, keypoints=np.stack([given.get(i, np.zeros((67, 3))) for i in ids]))
             seconds["detect"] += time.perf_counter() - t0

@@ -1,10 +1,12 @@
 """Per-frame observations of the tracked person from the detector, as fixed-shape arrays."""
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from jaxmocap.detect import Detector, to_openpose
+from jaxmocap.detect.openpose import LEFT_HAND_SLICE, RIGHT_HAND_SLICE
 
 
 @dataclass(frozen=True)
@@ -41,3 +43,28 @@ def observe(detector: Detector, frames: list[np.ndarray]) -> Observations:
             if world is not None:
                 hands_world[i, side], hands_conf[i, side], hand_boxes[i, side] = world, score, box
     return Observations(keypoints, body_world, hands_world, hands_conf, body_box, hand_boxes, found)
+
+
+def fill_hand_gaps(obs: Observations, max_gap: int) -> Observations:
+    """Each hand lost for at most ``max_gap`` frames between two frames that have it (the person found throughout)
+    interpolated linearly: its 2D keypoints (those seen at both ends), 3D landmarks, presence and box."""
+    keypoints, hands_world = obs.keypoints.copy(), obs.hands_world.copy()
+    hands_conf, hand_boxes = obs.hands_conf.copy(), obs.hand_boxes.copy()
+    for side, part in enumerate((LEFT_HAND_SLICE, RIGHT_HAND_SLICE)):
+        seen = np.flatnonzero(obs.hands_conf[:, side] > 0)
+        for a, b in zip(seen[:-1], seen[1:]):
+            if not 1 < b - a <= max_gap + 1 or not obs.found[a:b].all():
+                continue
+            later = (np.arange(a + 1, b) - a) / (b - a)  # the weight of frame b
+
+            def lerp(x):
+                w = later.reshape((-1,) + (1,) * (x.ndim - 1))
+                return (1 - w) * x[a] + w * x[b]
+
+            both = (obs.keypoints[a, part, 2] > 0) & (obs.keypoints[b, part, 2] > 0)
+            keypoints[a + 1:b, part] = lerp(obs.keypoints[:, part]) * both[None, :, None]
+            hands_world[a + 1:b, side] = lerp(obs.hands_world[:, side])
+            hands_conf[a + 1:b, side] = lerp(obs.hands_conf[:, side])
+            hand_boxes[a + 1:b, side] = lerp(obs.hand_boxes[:, side])
+    return dataclasses.replace(obs, keypoints=keypoints, hands_world=hands_world, hands_conf=hands_conf,
+                               hand_boxes=hand_boxes)
