@@ -107,11 +107,10 @@ def rotation_coherence(motion: dict) -> dict:
 def fingers_bent_backwards(motion: dict, tolerance_deg: float = 10.0) -> float:
     """The share of finger joint-frames (index to ring, both hands, valid frames) bent backwards, against their
     flexion, by more than ``tolerance_deg``."""
-    from jaxmocap.integrate.least_squares import BEND_LIMITS
+    from jaxmocap.integrate.least_squares import FINGER_BACKWARDS
 
     hands = np.concatenate([motion["left_hand_pose"], motion["right_hand_pose"]], 1)[np.asarray(motion["valid"])]
-    limits = [(j - 25, axis, sign) for j, axis, sign in BEND_LIMITS if j >= 25]
-    backwards = np.stack([sign * hands[:, j, axis] for j, axis, sign in limits], 1)
+    backwards = np.stack([sign * hands[:, j - 25, axis] for j, axis, sign in FINGER_BACKWARDS], 1)
     return float(np.mean(np.degrees(backwards) > tolerance_deg))
 
 

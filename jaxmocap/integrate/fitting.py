@@ -26,6 +26,7 @@ import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from jaxmocap.integrate import least_squares
+from jaxmocap.integrate.least_squares import prior_weights
 from jaxmocap.integrate.camera import weak_perspective_from_points, weak_perspective_least_squares
 from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, keypoints_cm, params_of
 from jaxmocap.sharding import shard_frames
@@ -72,14 +73,6 @@ def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
     theta[16], theta[17] = (0, 0, -1.1), (0, 0, 1.1)  # shoulders
     theta[18], theta[19] = (0, -0.3, 0), (0, 0.3, 0)  # elbows
     return jnp.asarray(theta, dtype)
-
-
-def prior_weights(config: FitConfig) -> np.ndarray:
-    """Per joint (55,), metres per radian. Jaw and eyes, which no keypoint sees, stay where they start."""
-    prior = np.full(55, config.prior_body, np.float32)
-    prior[0] = config.prior_global
-    prior[25:55] = config.prior_hand
-    return prior
 
 
 def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig) -> FitResult:

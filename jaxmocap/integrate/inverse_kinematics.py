@@ -40,7 +40,8 @@ RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
 # joint-frames over 45 degrees); 0.03 keeps them where the start puts them at no cost in 3D accuracy
 # (`bench/accuracy.py`, docs/BENCHMARKS.md).
 IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, cg_iterations=30, prior_global=1e-4,
-                             prior_body=0.03, prior_hand=5e-4, robust_scale=0.2)
+                             prior_body=0.03, prior_hand=5e-4, prior_finger_hinge=0.05, prior_finger_range=0.2,
+                             robust_scale=0.2)
 
 
 def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
@@ -49,10 +50,9 @@ def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     targets = jnp.where(finite[:, None], targets, 0.0)
     w = conf / jnp.maximum(jnp.sum(conf), 1e-12)
     offset = jnp.sum(w[:, None] * (targets - keypoints_cm(km, theta, betas).T), 0)
-    prior = np.where(np.arange(55) == 0, config.prior_global,
-                     np.where(np.arange(55) <= 21, config.prior_body, config.prior_hand)).astype(np.float32)
-    problem = least_squares.Problem(km, targets, conf, theta, betas, jnp.asarray(prior), jnp.ones((), theta.dtype),
-                                    free_joints, fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
+    prior = jnp.asarray(least_squares.prior_weights(config))
+    problem = least_squares.Problem(km, targets, conf, theta, betas, prior, jnp.ones((), theta.dtype), free_joints,
+                                    fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
     start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))
     out = least_squares.solve(problem, start, config).value
     pose, betas_out = least_squares.pose_and_shape(out, problem)

@@ -11,8 +11,9 @@ Residuals (`residuals`; half their sum of squares is the cost):
 * data: ``sqrt(conf) * r * sqrt(log1p(u) / u)`` per keypoint, ``r`` its error and ``u = |r|^2 / sigma^2``, whose
   square is Cauchy's robust ``conf * sigma^2 * log1p(u)``; ``sigma = robust_scale * scale_ref``;
 * priors, in metres times ``scale_ref`` (the initial camera scale, pixels or data units per metre): each joint
-  near its start ``prior[j] * (theta_j - theta0_j)``, shape ``prior_betas * betas``, and one-sided bending limits
-  of elbows and knees ``prior_bend * relu(sign * theta[j, axis])``.
+  near its start ``prior[j] * (theta_j - theta0_j)`` (per axis, `prior_weights`), shape ``prior_betas * betas``,
+  and one-sided joint limits ``weight * relu(sign * theta[j, axis] - slack)`` (`BEND_LIMITS`; ``prior_bend`` for
+  elbows, knees and fingers bent backwards, ``prior_finger_range`` for the fingers' range).
 
 The solver (`GaussNewtonCG`) is optimistix's Gauss-Newton iteration with a Levenberg-Marquardt descent that never
 forms the Jacobian (`descent.DampedNewtonCG`) on the IRLS model of the cost (`IRLSModel`: the analytic Jacobian
@@ -31,6 +32,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
@@ -39,18 +41,30 @@ from jaxmocap.integrate.descent import DampedNewtonCG, DampingSearch
 from jaxmocap.integrate import keypoints
 from jaxmocap.integrate.keypoints import KeypointModel, Linearization
 
-# One-sided bending limits (SMPLify-X's angle prior, and the fingers): (joint, axis component, sign): sign *
-# theta[joint, axis] > 0 is hyper-extension. Elbows bend about y (left negative, right positive), knees about x
-# (positive), the three joints of index, middle, pinky and ring fingers about z (left negative, right positive).
+# One-sided joint limits (SMPLify-X's angle prior, and the fingers'): (joint, axis component, sign, slack):
+# sign * theta[joint, axis] > slack (radians) is beyond the limit. Elbows bend about y (left negative, right
+# positive), knees about x (positive); the three joints of index, middle, pinky and ring fingers about z (left
+# negative, right positive), not backwards (some slack: a flat hand, where fits often start, sits on that
+# limit); their range (`_FINGER_RANGE`, weighted by ``prior_finger_range``): flexed up to 100 degrees, and only
+# the knuckles sideways (about y), by up to 20 degrees.
 FINGER_JOINTS = tuple(range(12))  # of each hand's 15: index, middle, pinky, ring; not the thumb
-BEND_LIMITS = ((18, 1, 1.0), (19, 1, -1.0), (4, 0, -1.0), (5, 0, -1.0)) + tuple(
-    (25 + k, 2, 1.0) for k in FINGER_JOINTS) + tuple((40 + k, 2, -1.0) for k in FINGER_JOINTS)
-_BEND_JOINT, _BEND_AXIS, _BEND_SIGN = (list(c) for c in zip(*BEND_LIMITS))  # lists: no cached constant dtypes
+FINGER_BACKWARDS = tuple((first + k, 2, -flex) for first, flex in ((25, -1.0), (40, 1.0)) for k in FINGER_JOINTS)
+_FINGER_RANGE = tuple((j, axis, -sign, 1.75) for j, axis, sign in FINGER_BACKWARDS) + tuple(
+    (first + k, 1, sign, 0.35) for first in (25, 40) for k in FINGER_JOINTS[::3] for sign in (1.0, -1.0))
+BEND_LIMITS = ((18, 1, 1.0, 0.0), (19, 1, -1.0, 0.0), (4, 0, -1.0, 0.0), (5, 0, -1.0, 0.0)) + tuple(
+    (j, axis, sign, 0.1) for j, axis, sign in FINGER_BACKWARDS) + _FINGER_RANGE
+_BEND_JOINT, _BEND_AXIS, _BEND_SIGN, _BEND_SLACK = (list(c) for c in zip(*BEND_LIMITS))  # lists: no cached dtypes
+
+
+def _bend_weights(config) -> np.ndarray:
+    """The weight of each of `BEND_LIMITS`, metres per radian."""
+    return np.where(np.arange(len(BEND_LIMITS)) < len(BEND_LIMITS) - len(_FINGER_RANGE), config.prior_bend,
+                    config.prior_finger_range).astype(np.float32)
 
 
 def _bend(pose):
-    """``sign * theta[joint, axis]`` of each bending limit: positive is hyper-extension."""
-    return jnp.asarray(_BEND_SIGN, pose.dtype) * pose[_BEND_JOINT, _BEND_AXIS]
+    """``sign * theta[joint, axis] - slack`` of each bending limit: positive is hyper-extension."""
+    return jnp.asarray(_BEND_SIGN, pose.dtype) * pose[_BEND_JOINT, _BEND_AXIS] - jnp.asarray(_BEND_SLACK, pose.dtype)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,8 +77,10 @@ class SolverConfig:
     prior_global: float = 1e-3  # metres per radian
     prior_body: float = 0.02
     prior_hand: float = 0.005
+    prior_finger_hinge: float = 0.005  # index to ring fingers off their flexion axis (`prior_weights`)
     prior_betas: float = 0.005  # metres per unit of beta
     prior_bend: float = 0.2
+    prior_finger_range: float = 0.0  # the fingers' range of motion (`BEND_LIMITS`)
     initial_damping: float = 1e-3  # Marquardt's mu at the start (relative to the diagonal of J^T J)
 
 
@@ -82,7 +98,7 @@ class Problem(NamedTuple):
     conf: Float[Array, "K"]  # 0 = missing
     pose0: Float[Array, "55 3"]  # prior centre, and the pose of joints that are not free
     betas0: Float[Array, "B"]  # the shape when it is not free
-    prior: Float[Array, "55"]  # prior weight per joint, metres per radian
+    prior: Float[Array, "55 3"]  # prior weight per joint and axis, metres per radian (`prior_weights`)
     scale_ref: Float[Array, ""]  # pixels (or data units) per metre
     free: Float[Array, "55"]  # 1 = joint free
     fit_betas: Float[Array, ""]  # 1 = shape free
@@ -95,6 +111,22 @@ class Residuals(NamedTuple):
     pose: Float[Array, "55 3"]
     betas: Float[Array, "B"]
     bend: Float[Array, "L"]  # one per bending limit
+
+
+def prior_weights(config: SolverConfig) -> np.ndarray:
+    """``(55, 3)`` metres per radian: the global orientation, the body (jaw and eyes, which no keypoint sees,
+    stay where they start), the hands. Index to ring fingers are hinges, which keypoints alone do not make them:
+    their twist about the bone (SMPL-X's x in the rest pose), and sideways bending (y) but at the knuckle, keep
+    to the start by ``prior_finger_hinge``, and so do the thumbs (their axes are not the model's)."""
+    prior = np.full((55, 3), config.prior_body, np.float32)
+    prior[0] = config.prior_global
+    prior[25:55] = config.prior_hand
+    for first in (25, 40):
+        fingers = first + np.asarray(FINGER_JOINTS)
+        prior[fingers, 0] = config.prior_finger_hinge
+        prior[fingers[np.asarray(FINGER_JOINTS) % 3 > 0], 1] = config.prior_finger_hinge
+        prior[first + 12:first + 15] = np.maximum(config.prior_finger_hinge, config.prior_hand)  # thumb
+    return prior
 
 
 def _log1p_ratio(u):
@@ -141,8 +173,8 @@ def residuals(y: Unknowns, problem: Problem, config: SolverConfig) -> Residuals:
     r = project(keypoints.keypoints_cm(problem.km, pose, betas), y.camera, problem)[0] - problem.target.T
     sref = problem.scale_ref
     return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(_cauchy_u(r, problem, config))),
-                     sref * problem.prior[:, None] * (pose - problem.pose0), sref * config.prior_betas * betas,
-                     sref * config.prior_bend * jax.nn.relu(_bend(pose)))
+                     sref * problem.prior * (pose - problem.pose0), sref * config.prior_betas * betas,
+                     sref * _bend_weights(config) * jax.nn.relu(_bend(pose)))
 
 
 class Blocks(NamedTuple):
@@ -200,8 +232,8 @@ def _camera_block(w, dlogscale, depth):
 def _prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Unknowns]:
     """The gradient and the (Gauss-Newton, diagonal) Hessian of the priors' half sum of squares."""
     sref = problem.scale_ref
-    pose_weight = jnp.broadcast_to((sref * problem.prior[:, None]) ** 2, pose.shape)
-    bend_weight, bend = (sref * config.prior_bend) ** 2, _bend(pose)
+    pose_weight = (sref * problem.prior) ** 2
+    bend_weight, bend = (sref * _bend_weights(config)) ** 2, _bend(pose)
     gradient = (pose_weight * (pose - problem.pose0)).at[_BEND_JOINT, _BEND_AXIS].add(
         bend_weight * jax.nn.relu(bend) * jnp.asarray(_BEND_SIGN, pose.dtype))
     hessian = pose_weight.at[_BEND_JOINT, _BEND_AXIS].add(bend_weight * (bend > 0))

@@ -41,6 +41,8 @@ def random_pose(rng, t: int) -> np.ndarray:
     theta[:, 5, 0] = rng.uniform(0.0, 1.0, t)
     curl = rng.uniform(0.0, 1.2, (t, 2, 5, 1))  # per finger
     hands = rng.normal(0, 0.1, (t, 2, 15, 3))
+    hands[:, :, :12, 0] *= 0.2  # index to ring fingers are hinges: little twist, sideways only at the knuckle
+    hands[:, :, [1, 2, 4, 5, 7, 8, 10, 11], 1] *= 0.2
     for side, sign in ((0, -1.0), (1, 1.0)):
         for finger in range(4):  # index, middle, pinky, ring curl about z, never backwards
             joints = slice(3 * finger, 3 * finger + 3)

@@ -1,8 +1,9 @@
 """``jaxmocap run``: video (or images, or a webcam) in; whole-body SMPL-X motion, keypoints, overlay and exports out.
 
-The embedded default path (no licensed file): detector (2D keypoints and metric 3D landmarks) -> IK of body and
-hands from the 3D landmarks (hands pasted under the body's kinematics) -> optimisation integration on the 2D
-keypoints -> temporal smoothing. With FrankMocap's converted weights: body and hand regressors on the detector's
+The embedded default path (no licensed file): detector (2D keypoints and metric 3D landmarks; left and right put
+back where it exchanged them, hands lost for a moment interpolated) -> IK of body and hands from the 3D landmarks
+(hands pasted under the body's kinematics) -> optimisation integration on the 2D keypoints through a pinhole
+camera -> temporal smoothing. With FrankMocap's converted weights: body and hand regressors on the detector's
 boxes -> copy-and-paste -> optionally the same fit. Frames go in chunks; each finished chunk is stored, so an
 interrupted run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (the
 detector starts afresh at every chunk, in both cases).
@@ -32,7 +33,7 @@ from jaxmocap.io import file_sha256
 from jaxmocap.media import open_media
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chunks import ChunkStore
-from jaxmocap.pipeline.observe import Observations, fill_hand_gaps, observe
+from jaxmocap.pipeline.observe import Observations, fill_hand_gaps, observe, repair_side_swaps
 from jaxmocap.pipeline.outputs import EXPORT_FILES, write_exports, write_overlay
 from jaxmocap.pipeline.regress import Regression, solve_regressors
 
@@ -64,7 +65,7 @@ def initial_bodies(model, obs: Observations) -> smplx_jax.SMPLXParams:
 # The fit from the IK start: the start already holds BlazePose's 3D (depth, twists) that the 2D keypoints do not see,
 # so the prior keeps the fit near it (0.1 m/rad; the generic fit's 0.02 lets depth drift: 3D error +10 mm on real
 # footage, `bench/accuracy.py`).
-FIT_FROM_IK = FitConfig(prior_body=0.1)
+FIT_FROM_IK = FitConfig(prior_body=0.1, prior_finger_hinge=0.05, prior_finger_range=0.2)
 
 
 def fitted_bodies(model, obs: Observations, init: smplx_jax.SMPLXParams, image_size, iterations: int = 20,
@@ -172,7 +173,7 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
             detector.reset()
             obs = observe(detector, [frame for _, frame in batch])
             if not still:
-                obs = fill_hand_gaps(obs, round(HAND_GAP_SECONDS * media.fps))
+                obs = fill_hand_gaps(repair_side_swaps(obs), round(HAND_GAP_SECONDS * media.fps))
             if given is not None:
                 obs = dataclasses.replace(obs, keypoints=np.stack([given.get(i, np.zeros((67, 3))) for i in ids]))
             seconds["detect"] += time.perf_counter() - t0

@@ -68,3 +68,45 @@ def fill_hand_gaps(obs: Observations, max_gap: int) -> Observations:
             hand_boxes[a + 1:b, side] = lerp(obs.hand_boxes[:, side])
     return dataclasses.replace(obs, keypoints=keypoints, hands_world=hands_world, hands_conf=hands_conf,
                                hand_boxes=hand_boxes)
+
+
+# Left/right pairs of each side group: (OpenPose BODY_25 pairs, BlazePose pairs); the arms' group carries the hands.
+_ARMS = (((2, 5), (3, 6), (4, 7)), ((11, 12), (13, 14), (15, 16), (17, 18), (19, 20), (21, 22)))
+_LEGS = (((9, 12), (10, 13), (11, 14), (19, 22), (20, 23), (21, 24)),
+         ((23, 24), (25, 26), (27, 28), (29, 30), (31, 32)))
+
+
+def _swap_sides(obs: Observations, t: int, group) -> None:
+    """Exchange left and right of one side group in frame ``t``, in place."""
+    openpose, blazepose = group
+    for a, b in openpose:
+        obs.keypoints[t, [a, b]] = obs.keypoints[t, [b, a]]
+    for a, b in blazepose:
+        obs.body_world[t, [a, b]] = obs.body_world[t, [b, a]]
+    if group is _ARMS:
+        obs.keypoints[t, 25:67] = np.roll(obs.keypoints[t, 25:67], 21, axis=0)
+        for hands in (obs.hands_world, obs.hands_conf, obs.hand_boxes):
+            hands[t] = hands[t, ::-1].copy()
+
+
+def repair_side_swaps(obs: Observations, ratio: float = 0.5) -> Observations:
+    """Arms (with hands) or legs whose left and right the detector exchanged, put back, frame after frame: where
+    the limbs' 2D keypoints lie, with left and right exchanged, nearer the previous frame's (by ``ratio`` of the
+    distance) than as detected, and farther than a tenth of the torso apart. A swap the detector keeps for many
+    frames is repaired in all of them, as each is compared with its repaired predecessor."""
+    obs = dataclasses.replace(obs, **{k: getattr(obs, k).copy() for k in (
+        "keypoints", "body_world", "hands_world", "hands_conf", "hand_boxes")})
+    for t in np.flatnonzero(obs.found[1:] & obs.found[:-1]) + 1:
+        now, before = obs.keypoints[t], obs.keypoints[t - 1]
+        torso = np.linalg.norm(now[1, :2] - now[8, :2]) if now[1, 2] > 0 and now[8, 2] > 0 else np.inf
+        for group in (_ARMS, _LEGS):
+            left, right = (list(side) for side in zip(*group[0]))
+            seen = (now[left, 2] > 0) & (now[right, 2] > 0) & (before[left, 2] > 0) & (before[right, 2] > 0)
+            if not seen.any():
+                continue
+            distance = lambda a, b: np.linalg.norm(now[a, :2] - before[b, :2], axis=-1)[seen].mean()  # noqa: E731
+            same = distance(left, left) + distance(right, right)
+            swapped = distance(left, right) + distance(right, left)
+            if swapped < ratio * same and same > 0.2 * torso:
+                _swap_sides(obs, t, group)
+    return obs
