@@ -38,10 +38,12 @@ RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
 # neighbours, are not seen by joint positions; with weaker body priors (2e-3) IK picked them afresh in every frame
 # of real footage (knees, ankles and feet turning by ~100 degrees between frames 1/60 s apart, 35-55% of
 # joint-frames over 45 degrees); 0.03 keeps them where the start puts them at no cost in 3D accuracy
-# (`bench/accuracy.py`, docs/BENCHMARKS.md).
+# (`bench/accuracy.py`, docs/BENCHMARKS.md). The fingers likewise: without the hinge priors and the range limits
+# the hand landmarks were met by fingers turned by 1-3 radians off their flexion axis, which smoothing then bent
+# backwards; holding the whole thumb instead of its outer joints cost 1.3 mm of body PA-MPJPE on the bundled clip.
 IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, cg_iterations=30, prior_global=1e-4,
-                             prior_body=0.03, prior_hand=5e-4, prior_finger_hinge=0.05, prior_finger_range=0.2,
-                             robust_scale=0.2)
+                             prior_body=0.03, prior_hand=5e-4, prior_finger_hinge=0.05, prior_thumb=0.05,
+                             prior_finger_range=0.2, robust_scale=0.2)
 
 
 def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):

@@ -78,6 +78,7 @@ class SolverConfig:
     prior_body: float = 0.02
     prior_hand: float = 0.005
     prior_finger_hinge: float = 0.005  # index to ring fingers off their flexion axis (`prior_weights`)
+    prior_thumb: float = 0.005
     prior_betas: float = 0.005  # metres per unit of beta
     prior_bend: float = 0.2
     prior_finger_range: float = 0.0  # the fingers' range of motion (`BEND_LIMITS`)
@@ -117,7 +118,8 @@ def prior_weights(config: SolverConfig) -> np.ndarray:
     """``(55, 3)`` metres per radian: the global orientation, the body (jaw and eyes, which no keypoint sees,
     stay where they start), the hands. Index to ring fingers are hinges, which keypoints alone do not make them:
     their twist about the bone (SMPL-X's x in the rest pose), and sideways bending (y) but at the knuckle, keep
-    to the start by ``prior_finger_hinge``, and so do the thumbs (their axes are not the model's)."""
+    to the start by ``prior_finger_hinge``; the thumbs' two outer joints (hinges whose axes are not the model's)
+    by ``prior_thumb``."""
     prior = np.full((55, 3), config.prior_body, np.float32)
     prior[0] = config.prior_global
     prior[25:55] = config.prior_hand
@@ -125,7 +127,7 @@ def prior_weights(config: SolverConfig) -> np.ndarray:
         fingers = first + np.asarray(FINGER_JOINTS)
         prior[fingers, 0] = config.prior_finger_hinge
         prior[fingers[np.asarray(FINGER_JOINTS) % 3 > 0], 1] = config.prior_finger_hinge
-        prior[first + 12:first + 15] = np.maximum(config.prior_finger_hinge, config.prior_hand)  # thumb
+        prior[first + 13:first + 15] = config.prior_thumb  # the thumb's base (12) moves freely
     return prior
 
 
