@@ -102,7 +102,7 @@ def test_fit_recovers_ground_truth_from_noisy_partial_keypoints(model, noisy, no
 
 def test_fitted_fingers_never_bend_backwards(model, noisy):
     """From a start with the fingers bent backwards (the curl of the truth reversed), the fit bends none back by
-    more than 10 degrees."""
+    more than 15 degrees (the limit is soft: past 6 degrees, a residual of `prior_bend` per radian)."""
     from jaxmocap.integrate.least_squares import FINGER_BACKWARDS
 
     def backwards(params):
@@ -114,7 +114,7 @@ def test_fitted_fingers_never_bend_backwards(model, noisy):
     start = noisy.init.replace(left_hand_pose=jnp.asarray(left), right_hand_pose=jnp.asarray(right))
     assert (backwards(start) > 10).mean() > 0.5
     result = fit(model, noisy.keypoints, start)
-    assert (backwards(result.params) > 10).mean() == 0, backwards(result.params).max()
+    assert (backwards(result.params) > 15).mean() == 0, backwards(result.params).max()
 
 
 def test_fit_without_noise_is_exact_to_half_a_pixel(model):

@@ -5,12 +5,12 @@
 
 Each frame is a robust least-squares problem solved by `optimistix.least_squares` (`least_squares.solve`):
 confidence-weighted Cauchy-robust reprojection of the 67 keypoints, a prior that keeps each joint near the initial
-pose (weaker for hands), shape L2 and elbow/knee bending limits. The camera is a pinhole of known focal length
-(``focal_length`` and ``principal_point``: the body's depth and perspective are fitted, ``params.transl`` is its
-origin in the camera frame) or weak perspective (no focal length). `fit_frame` is pure: it works under `jax.jit`,
-`jax.vmap` and `jax.grad`; gradients of the fitted parameters with respect to the keypoints, their confidences,
-the start and the camera come from implicit differentiation. `fit` jits it once per padded batch size
-(`BUCKETS`; longer inputs run in chunks of the largest) and spreads the frames over all devices.
+pose (weaker for hands; fingers as hinges), shape L2 and the joint limits of elbows, knees and fingers. The camera
+is a pinhole of known focal length (``focal_length`` and ``principal_point``: the body's depth and perspective are
+fitted, ``params.transl`` is its origin in the camera frame) or weak perspective (no focal length). `fit_frame` is
+pure: it works under `jax.jit`, `jax.vmap` and `jax.grad`; gradients of the fitted parameters with respect to the
+keypoints, their confidences, the start and the camera come from implicit differentiation. `fit` jits it once per
+padded batch size (`BUCKETS`; longer inputs run in chunks of the largest) and spreads the frames over all devices.
 """
 
 from __future__ import annotations

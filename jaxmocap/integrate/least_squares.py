@@ -119,15 +119,16 @@ def prior_weights(config: SolverConfig) -> np.ndarray:
     stay where they start), the hands. Index to ring fingers are hinges, which keypoints alone do not make them:
     their twist about the bone (SMPL-X's x in the rest pose), and sideways bending (y) but at the knuckle, keep
     to the start by ``prior_finger_hinge``; the thumbs' two outer joints (hinges whose axes are not the model's)
-    by ``prior_thumb``."""
+    by ``prior_thumb`` (neither less than ``prior_hand``)."""
     prior = np.full((55, 3), config.prior_body, np.float32)
     prior[0] = config.prior_global
     prior[25:55] = config.prior_hand
     for first in (25, 40):
         fingers = first + np.asarray(FINGER_JOINTS)
-        prior[fingers, 0] = config.prior_finger_hinge
-        prior[fingers[np.asarray(FINGER_JOINTS) % 3 > 0], 1] = config.prior_finger_hinge
-        prior[first + 13:first + 15] = config.prior_thumb  # the thumb's base (12) moves freely
+        hinge, thumb = max(config.prior_finger_hinge, config.prior_hand), max(config.prior_thumb, config.prior_hand)
+        prior[fingers, 0] = hinge
+        prior[fingers[np.asarray(FINGER_JOINTS) % 3 > 0], 1] = hinge
+        prior[first + 13:first + 15] = thumb  # the thumb's base (12) moves freely
     return prior
 
 
