@@ -30,7 +30,7 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
     import smplx
     import torch
 
-    from jaxmocap.integrate.least_squares import BEND_LIMITS, _bend_weights
+    from jaxmocap.integrate.least_squares import BEND_LIMITS, bend_weights
     from smplx_jax import constants
 
     torch.set_num_threads(threads)
@@ -63,7 +63,7 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
         reg = reg + (s0 * config.prior_betas) ** 2 * (var["betas"] ** 2).sum(1)
         pose = torch.cat([var["global_orient"], var["body_pose"], jaw, jaw, jaw, var["left_hand_pose"],
                           var["right_hand_pose"]], 1).reshape(b, 55, 3)  # SMPL-X's joint order
-        for (j, c, sign, slack), weight in zip(BEND_LIMITS, _bend_weights(config)):
+        for (j, c, sign, slack), weight in zip(BEND_LIMITS, bend_weights(config)):
             reg = reg + (s0 * weight) ** 2 * torch.relu(sign * pose[:, j, c] - slack) ** 2
         return (0.5 * (data + reg) / s0**2).sum()
 
