@@ -135,13 +135,15 @@ def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
     from jaxmocap.media import open_media
     from jaxmocap.motion import lens, read_motion
     from jaxmocap.pipeline import fitted_bodies, initial_bodies, observe, run
+    from jaxmocap.pipeline.observe import repaired
 
     run(video, work, end=end, overlay=False, progress=False)
     motion = read_motion(work / "motion.npz")
     model = smplx_jax.load_model(smplx_jax.default_model_path())
-    _, frames = open_media(video, 0, end, 1)
-    obs = observe(Detector(static_image_mode=False), [frame for _, frame in frames])  # as `run` detects
-    blazepose = np.where(obs.found[:, None, None], obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], np.nan)
+    media, frames = open_media(video, 0, end, 1)
+    detected = observe(Detector(static_image_mode=False), [frame for _, frame in frames])  # as `run` detects
+    blazepose = np.where(detected.found[:, None, None], detected.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], np.nan)
+    obs = repaired(detected, media.fps)
     init = initial_bodies(model, obs)
     result = jax.block_until_ready(fitted_bodies(model, obs, init, motion["image_size"]))
     ones = np.ones(len(obs.found))

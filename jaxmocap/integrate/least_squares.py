@@ -123,9 +123,9 @@ def prior_weights(config: SolverConfig) -> np.ndarray:
     prior = np.full((55, 3), config.prior_body, np.float32)
     prior[0] = config.prior_global
     prior[25:55] = config.prior_hand
+    hinge, thumb = max(config.prior_finger_hinge, config.prior_hand), max(config.prior_thumb, config.prior_hand)
     for first in (25, 40):
         fingers = first + np.asarray(FINGER_JOINTS)
-        hinge, thumb = max(config.prior_finger_hinge, config.prior_hand), max(config.prior_thumb, config.prior_hand)
         prior[fingers, 0] = hinge
         prior[fingers[np.asarray(FINGER_JOINTS) % 3 > 0], 1] = hinge
         prior[first + 13:first + 15] = thumb  # the thumb's base (12) moves freely

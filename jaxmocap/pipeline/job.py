@@ -33,12 +33,11 @@ from jaxmocap.io import file_sha256
 from jaxmocap.media import open_media
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chunks import ChunkStore
-from jaxmocap.pipeline.observe import Observations, fill_hand_gaps, observe, repair_side_swaps
+from jaxmocap.pipeline.observe import Observations, observe, repaired
 from jaxmocap.pipeline.outputs import EXPORT_FILES, write_exports, write_overlay
 from jaxmocap.pipeline.regress import Regression, solve_regressors
 
 SETTINGS_VERSION = 3
-HAND_GAP_SECONDS = 0.25  # a hand lost for at most this long is interpolated
 
 
 @dataclass
@@ -92,11 +91,8 @@ def _solve(model, obs, image_size, iterations, focal_length, seconds):
     seconds["ik"] += t1 - t0
     seconds["fit"] += time.perf_counter() - t1
     arrays = {k: np.asarray(v) for k, v in vars(result.params).items()}
-    focal, center = _lens(image_size, focal_length)
-    n = len(obs.found)
     return arrays | {"camera_scale": np.asarray(result.camera_scale), "camera_trans": np.asarray(result.camera_trans),
-                     "valid": obs.found & np.asarray(result.valid), "focal_length": np.full(n, focal, np.float32),
-                     "principal_point": np.tile(center, (n, 1))}
+                     "valid": obs.found & np.asarray(result.valid)}
 
 
 def _keypoints_by_frame(folder) -> dict[int, np.ndarray]:
@@ -173,7 +169,7 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
             detector.reset()
             obs = observe(detector, [frame for _, frame in batch])
             if not still:
-                obs = fill_hand_gaps(repair_side_swaps(obs), round(HAND_GAP_SECONDS * media.fps))
+                obs = repaired(obs, media.fps)
             if given is not None:
                 obs = dataclasses.replace(obs, keypoints=np.stack([given.get(i, np.zeros((67, 3))) for i in ids]))
             seconds["detect"] += time.perf_counter() - t0
@@ -199,7 +195,8 @@ def run(source, out_dir, *, model_path=None, weights=None, integration: str = "o
     bar.close()
 
     t0 = time.perf_counter()
-    motion = _assemble(model, chunks, smooth)
+    lens = (None, None) if regression is not None else _lens(media.size, focal_length)  # as the chunks were fitted
+    motion = _assemble(model, chunks, smooth, lens)
     motion |= {"fps": np.asarray(media.fps), "image_size": np.asarray(media.size),
                "model_sha256": np.asarray(model_sha)}
     write_motion(report.motion, motion)
@@ -232,12 +229,12 @@ def _frame_images(media, out_dir: Path, frame_ids) -> list[Path]:
     return [out_dir / "frames" / f"{prefix}{i:05d}.jpg" for i in frame_ids]
 
 
-def _assemble(model, chunks, smooth):
-    """The whole sequence from its chunks, smoothed over all frames."""
+def _assemble(model, chunks, smooth, lens):
+    """The whole sequence from its chunks, smoothed over all frames; ``lens``: the pinhole camera the chunks were
+    fitted through, or ``(None, None)``."""
     cat = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0] if k != "frame_index"}
     params = smplx_jax.SMPLXParams(**{k: jnp.asarray(cat[k]) for k in (
         "global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "leye_pose", "reye_pose",
         "betas", "expression", "transl")})
-    lens = (cat["focal_length"][0], cat["principal_point"][0]) if "focal_length" in cat else (None, None)
     return fitted_motion(model, params, cat["camera_scale"], cat["camera_trans"], cat["valid"], cat["keypoints_2d"],
                          smooth, *lens)

@@ -45,6 +45,15 @@ def observe(detector: Detector, frames: list[np.ndarray]) -> Observations:
     return Observations(keypoints, body_world, hands_world, hands_conf, body_box, hand_boxes, found)
 
 
+HAND_GAP_SECONDS = 0.25  # a hand lost for at most this long is interpolated
+
+
+def repaired(obs: Observations, fps: float) -> Observations:
+    """Video observations with left and right put back where the detector exchanged them (`repair_side_swaps`)
+    and hands lost for at most ``HAND_GAP_SECONDS`` interpolated (`fill_hand_gaps`)."""
+    return fill_hand_gaps(repair_side_swaps(obs), round(HAND_GAP_SECONDS * fps))
+
+
 def fill_hand_gaps(obs: Observations, max_gap: int) -> Observations:
     """Each hand lost for at most ``max_gap`` frames between two frames that have it (the person found throughout)
     interpolated linearly: its 2D keypoints (those seen at both ends), 3D landmarks, presence and box."""
