@@ -127,29 +127,26 @@ class Stages:
 def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
     """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before smoothing, from
     the same library calls."""
-    import jax
-
     import smplx_jax
     from jaxmocap.detect import Detector
-    from jaxmocap.integrate import fitted_motion
     from jaxmocap.media import open_media
     from jaxmocap.motion import lens, read_motion
-    from jaxmocap.pipeline import fitted_bodies, initial_bodies, observe, run
+    from jaxmocap.pipeline import (Bodies, RunConfig, fitted_bodies, initial_bodies, motion_arrays, observations,
+                                   run)
     from jaxmocap.pipeline.observe import repaired
 
-    run(video, work, end=end, overlay=False, progress=False)
+    run(RunConfig(video, end=end, overlay=False, progress=False), work)
     motion = read_motion(work / "motion.npz")
     model = smplx_jax.load_model(smplx_jax.default_model_path())
     media, frames = open_media(video, 0, end, 1)
-    detected = observe(Detector(static_image_mode=False), [frame for _, frame in frames])  # as `run` detects
+    frames = [frame for _, frame in frames]
+    detected = observations(Detector(static_image_mode=False), frames, None)  # BlazePose's own, unrepaired
     blazepose = np.where(detected.found[:, None, None], detected.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], np.nan)
-    obs = repaired(detected, media.fps)
+    obs = repaired(detected, media.fps)  # as `run` observes
     init = initial_bodies(model, obs)
-    result = jax.block_until_ready(fitted_bodies(model, obs, init, motion["image_size"]))
-    ones = np.ones(len(obs.found))
-    ik = fitted_motion(model, init, ones, np.zeros((len(ones), 2)), obs.found, obs.keypoints, smooth=False)
-    fitted = fitted_motion(model, result.params, result.camera_scale, result.camera_trans,
-                           obs.found & np.asarray(result.valid), obs.keypoints, False, *lens(motion))
+    count = len(obs.found)
+    ik = motion_arrays(model, Bodies(init, np.ones(count), np.zeros((count, 2)), obs.found), obs.keypoints)
+    fitted = motion_arrays(model, fitted_bodies(model, obs, init, lens(motion)), obs.keypoints, lens(motion))
     return Stages(blazepose, ik, fitted, motion)
 
 

@@ -26,7 +26,7 @@ def main():
 
     from flax import nnx
 
-    from jaxmocap.pipeline import run
+    from jaxmocap.pipeline import RunConfig, run
     from jaxmocap.regressors import BodyRegressor, HandRegressor, Regressors
     from jaxmocap.regressors.weights import save
 
@@ -36,7 +36,7 @@ def main():
         for path, options in (("default", {}), ("regressors", dict(weights=weights, integration="copy-paste"))):
             for name in ("first run",) + (() if args.quick else ("steady",)):
                 with tempfile.TemporaryDirectory() as tmp:
-                    report = run(CLIP, tmp, exports=("bvh", "gltf"), progress=False, **options)
+                    report = run(RunConfig(CLIP, exports=("bvh", "gltf"), progress=False, **options), tmp)
                 seconds = dict(report.seconds)
                 total = sum(seconds.values())
                 rows.append(dict(run=f"{path}, {name}", frames=report.frames, seconds=total,

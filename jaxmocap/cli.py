@@ -30,14 +30,15 @@ def _print_report(report):
 
 
 def _cmd_run(args):
-    from jaxmocap.pipeline import run
+    from jaxmocap.pipeline import RunConfig, run
 
-    exports = tuple(f for f in args.export.split(",") if f) if args.export else ()
-    _print_report(run(args.input, args.out, model_path=args.model, weights=args.weights, integration=args.integration,
-                      keypoints_dir=args.keypoints, start=args.start, end=args.end, stride=args.stride,
-                      chunk_size=args.chunk, iterations=args.iterations, focal_length=args.focal_length,
-                      smooth=not args.no_smooth, overlay=not args.no_overlay, exports=exports, progress=not args.quiet,
-                      hand_boxes=args.hand_boxes, frankmocap_pkl=args.frankmocap_pkl))
+    config = RunConfig(
+        args.input, model=args.model, weights=args.weights, integration=args.integration, hand_boxes=args.hand_boxes,
+        keypoints=args.keypoints, start=args.start, end=args.end, stride=args.stride, chunk_size=args.chunk,
+        iterations=args.iterations, focal_length=args.focal_length, smooth=not args.no_smooth,
+        overlay=not args.no_overlay, exports=tuple(f for f in args.export.split(",") if f),
+        frankmocap_pkl=args.frankmocap_pkl, progress=not args.quiet)
+    _print_report(run(config, args.out))
 
 
 def _cmd_demo(args):
@@ -55,7 +56,7 @@ def _cmd_detect(args):
 
 
 def _cmd_fit(args):
-    from jaxmocap.integrate.folder import fit_keypoint_folder
+    from jaxmocap.pipeline.fit_folder import fit_keypoint_folder
 
     path = fit_keypoint_folder(args.keypoints, args.out, model_path=args.model, iterations=args.iterations,
                                init=args.init, smooth=args.smooth, image_size=args.image_size, fps=args.fps,

@@ -51,6 +51,6 @@ def render_body_model(model_path: Path, out_dir: Path) -> list[Path]:
 
 def demo(out_dir: Path, frankmocap_pkl: bool = False):
     """The main job on the bundled Pose2Sim clip, with both exports (and FrankMocap's pickles if asked)."""
-    from jaxmocap.pipeline import run
+    from jaxmocap.pipeline import RunConfig, run
 
-    return run(DEMO_CLIP, out_dir, exports=("bvh", "gltf"), frankmocap_pkl=frankmocap_pkl)
+    return run(RunConfig(DEMO_CLIP, exports=("bvh", "gltf"), frankmocap_pkl=frankmocap_pkl), out_dir)

@@ -20,7 +20,7 @@ from jaxmocap.cli import main
 from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.integrate import copy_paste, fit, fit_frame, ik, smooth_params, smooth_rotvecs, synthetic
 from jaxmocap.integrate import fitting
-from jaxmocap.integrate.folder import infer_image_size
+from jaxmocap.pipeline.fit_folder import infer_image_size
 from jaxmocap.motion import motion_params, read_motion
 from smplx_jax import constants, rotations
 

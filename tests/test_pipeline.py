@@ -1,5 +1,6 @@
 """End to end: ``jaxmocap run`` on frames of the sample clip — outputs, conventions, resume, bad input."""
 
+import dataclasses
 import json
 import pickle
 import struct
@@ -12,11 +13,12 @@ import smplx
 import torch
 
 import frankmocap_reference as ref
-import jaxmocap.pipeline.job as pipeline_run
+import jaxmocap.pipeline.job as pipeline_job
 import smplx_jax
 from jaxmocap.cli import main
+from jaxmocap.errors import InputError
 from jaxmocap.io import file_sha256
-from jaxmocap.pipeline import Observations
+from jaxmocap.pipeline import Observations, RunConfig
 from jaxmocap.pipeline.observe import fill_hand_gaps
 from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from smplx_jax import constants
@@ -25,10 +27,14 @@ CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.
 FRAMES, CHUNK = 8, 4  # every run here has the same shapes, so the jitted stages compile once
 
 
+def run(source, out, **options):
+    return pipeline_job.run(RunConfig(source, **options), out)
+
+
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    report = pipeline_run.run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
+    report = run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
                               progress=False, frankmocap_pkl=True)
     return out, report
 
@@ -165,7 +171,7 @@ def test_overlay_and_exports(result):
 
 def test_interrupted_run_resumes_to_the_same_motion(result, tmp_path, monkeypatch):
     out, _ = result
-    solve, calls = pipeline_run._solve, []
+    solve, calls = pipeline_job.solve_chunk, []
 
     def interrupted(*args):
         calls.append(1)
@@ -173,12 +179,12 @@ def test_interrupted_run_resumes_to_the_same_motion(result, tmp_path, monkeypatc
             raise KeyboardInterrupt
         return solve(*args)
 
-    monkeypatch.setattr(pipeline_run, "_solve", interrupted)
+    monkeypatch.setattr(pipeline_job, "solve_chunk", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        pipeline_run.run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
+        run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
     assert not (tmp_path / "motion.npz").exists() and len(list((tmp_path / ".jaxmocap_chunks").glob("*.npz"))) == 1
-    monkeypatch.setattr(pipeline_run, "_solve", solve)
-    pipeline_run.run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
+    monkeypatch.setattr(pipeline_job, "solve_chunk", solve)
+    run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
     assert (tmp_path / "motion.npz").read_bytes() == (out / "motion.npz").read_bytes()
 
 
@@ -188,7 +194,7 @@ def test_clip_without_people(tmp_path):
     for k in range(FRAMES):
         writer.write(np.full((240, 320, 3), 40 + 10 * k, np.uint8))
     writer.release()
-    report = pipeline_run.run(path, tmp_path / "out", chunk_size=CHUNK, exports=("bvh",), progress=False)
+    report = run(path, tmp_path / "out", chunk_size=CHUNK, exports=("bvh",), progress=False)
     motion = read_motion(report.motion)
     assert report.frames == FRAMES and not motion["valid"].any()
     assert not (tmp_path / "out" / "motion.bvh").exists()  # nothing to animate
@@ -224,7 +230,7 @@ def test_frankmocap_path_with_converted_weights(tmp_path, integration, hand_boxe
     assert main(["convert-frankmocap", "--hand", str(tmp_path / "pose_shape_best.pth"), "--hand-mean",
                  str(tmp_path / "mean_mano_params.pkl"), "--body", str(tmp_path / "body.pt"), "--out",
                  str(tmp_path / "weights")]) == 0
-    report = pipeline_run.run(CLIP, tmp_path / "out", weights=tmp_path / "weights", integration=integration,
+    report = run(CLIP, tmp_path / "out", weights=tmp_path / "weights", integration=integration,
                               start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False,
                               hand_boxes=hand_boxes, frankmocap_pkl=True)
     motion = read_motion(report.motion)
@@ -265,7 +271,7 @@ def test_given_keypoints_replace_the_detectors(result, tmp_path):
                 flat = person[key]
                 person[key] = [v + 30.0 if k % 3 == 0 and flat[k + 2] > 0 else v for k, v in enumerate(flat)]
         (moved / path.name).write_text(json.dumps(doc))
-    report = pipeline_run.run(CLIP, tmp_path / "out", keypoints_dir=moved, start=20, end=20 + FRAMES,
+    report = run(CLIP, tmp_path / "out", keypoints=moved, start=20, end=20 + FRAMES,
                               chunk_size=CHUNK, overlay=False, progress=False)
     original, shifted = read_motion(out / "motion.npz"), read_motion(report.motion)
     seen = original["keypoints_2d"][..., 2] > 0
@@ -317,3 +323,40 @@ def test_left_and_right_exchanged_by_the_detector_are_put_back():
     for repaired in (repair_side_swaps(swapped), repair_side_swaps(obs)):
         for key in ("keypoints", "body_world", "hands_world", "hands_conf", "hand_boxes"):
             np.testing.assert_array_equal(getattr(repaired, key), getattr(obs, key), err_msg=key)
+
+
+def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
+    """A stored chunk is reused only under the same options: each option (but those used after the last chunk)
+    changes the key, and so do the contents of the input files; the outputs asked for do not."""
+    from jaxmocap.pipeline.config import AT_THE_END, chunk_key
+
+    (tmp_path / "weights").mkdir()
+    (tmp_path / "weights" / "regressors.json").write_text("{}")
+    (tmp_path / "keypoints").mkdir()
+    other = tmp_path / "other.mp4"
+    other.write_bytes(CLIP.read_bytes())
+    variants = dict(source=other, model=None, weights=tmp_path / "weights", integration="copy-paste",
+                    hand_boxes="body", keypoints=tmp_path / "keypoints", start=1, end=9, stride=2, chunk_size=64,
+                    iterations=5, focal_length=1000.0)
+    keyed = {f.name for f in dataclasses.fields(RunConfig) if f.metadata != AT_THE_END}
+    assert set(variants) == keyed
+    for name, value in variants.items():
+        options = dict(source=CLIP) | (dict(weights=tmp_path / "weights") if name in ("integration", "hand_boxes")
+                                       else {})
+        changed = chunk_key(RunConfig(**options | {name: value}), "other-sha" if name == "model" else "model-sha")
+        assert changed != chunk_key(RunConfig(**options), "model-sha"), name
+    assert chunk_key(RunConfig(CLIP, smooth=False, overlay=False, exports=("bvh",), frankmocap_pkl=True,
+                               progress=False), "model-sha") == chunk_key(RunConfig(CLIP), "model-sha")
+    key = chunk_key(RunConfig(other), "model-sha")
+    other.write_bytes(CLIP.read_bytes()[:-1])  # the same path, another video
+    assert chunk_key(RunConfig(other), "model-sha") != key
+
+
+@pytest.mark.parametrize("options, message", [
+    (dict(integration="eft"), "needs --weights"), (dict(integration="magic"), "unknown integration"),
+    (dict(hand_boxes="body"), "needs --weights"), (dict(focal_length=-3.0), "focal-length must be positive"),
+    (dict(exports=("fbx",)), "unknown export format"), (dict(chunk_size=0), "chunk-size must be positive"),
+])
+def test_run_config_refuses_what_cannot_run(options, message):
+    with pytest.raises(InputError, match=message):
+        RunConfig(CLIP, **options)

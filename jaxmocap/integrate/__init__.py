@@ -10,8 +10,7 @@ Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks
 -> pose, shape, camera), `least_squares` (one body's robust least squares on `optimistix.least_squares`),
 `descent` (its matrix-free Levenberg-Marquardt parts), `keypoints` (model keypoints with an analytic Jacobian),
 `mat3` (3x3 kernels), `eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`, `motion`
-(fits -> motion.npz arrays), `folder` (the ``jaxmocap fit`` command), `synthetic` (problems with known answers for
-tests and benchmarks).
+(fits -> motion.npz arrays), `synthetic` (problems with known answers for tests and benchmarks).
 """
 
 from jaxmocap.integrate.camera import project, weak_perspective_from_points

@@ -1,5 +1,5 @@
-"""Per-frame fits -> the arrays of ``motion.npz``: optional temporal smoothing, then the reprojection errors of
-what is stored (so that the file's errors are those of its own parameters)."""
+"""Per-frame fits (smoothed or not) -> the arrays of ``motion.npz``, with the reprojection errors of what is stored
+(so that the file's errors are those of its own parameters)."""
 
 import jax
 import jax.numpy as jnp
@@ -8,12 +8,10 @@ import numpy as np
 import smplx_jax
 from jaxmocap.integrate import fitting
 from jaxmocap.integrate.camera import project
-from jaxmocap.integrate.smooth import smooth_camera, smooth_params
 from smplx_jax import constants
 
 _OPENPOSE = np.asarray(constants.OPENPOSE67_FROM_SMPLX)
 _JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
-_SMOOTH = jax.jit(smooth_params)
 
 
 def reprojection_errors(model, params, scale, trans, keypoints, focal_length=None, principal_point=None) -> np.ndarray:
@@ -34,15 +32,12 @@ def reprojection_errors(model, params, scale, trans, keypoints, focal_length=Non
 
 
 def fitted_motion(model, params: smplx_jax.SMPLXParams, camera_scale, camera_trans, valid, keypoints,
-                  smooth: bool, focal_length=None, principal_point=None) -> dict[str, np.ndarray]:
+                  focal_length=None, principal_point=None) -> dict[str, np.ndarray]:
     """``motion.npz`` arrays (all but ``fps``, ``image_size``, ``model_sha256``) of batched fits, with the pinhole
     camera's ``focal_length`` and ``principal_point`` when given; invalid frames keep their parameters and get
     error 0."""
     valid = np.asarray(valid, bool)
     scale, trans = jnp.asarray(camera_scale), jnp.asarray(camera_trans)
-    if smooth and valid.any():
-        params = _SMOOTH(params, jnp.asarray(valid))
-        scale, trans = smooth_camera(scale, trans, jnp.asarray(valid))
     keypoints = np.asarray(keypoints, np.float32)
     errors = reprojection_errors(model, params, scale, trans, keypoints, focal_length, principal_point)
     pinhole = {} if focal_length is None else {"focal_length": np.asarray(focal_length, np.float32),

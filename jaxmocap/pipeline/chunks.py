@@ -8,11 +8,12 @@ from pathlib import Path
 import numpy as np
 
 from jaxmocap.io import atomic_write_bytes, atomic_write_text
+from jaxmocap.pipeline.records import Chunk
 
 
 class ChunkStore:
-    """``<out>/.jaxmocap_chunks/``: ``settings.json`` and ``chunk_<k>.npz``. Settings that differ from the stored
-    ones (another input, range, model or option) discard the stored chunks."""
+    """``<out>/.jaxmocap_chunks/``: ``settings.json`` and ``chunk_<k>.npz``. Settings (`config.chunk_key`) that
+    differ from the stored ones (another input, range, model or option) discard the stored chunks."""
 
     def __init__(self, out_dir: Path, settings: dict):
         self.folder = Path(out_dir) / ".jaxmocap_chunks"
@@ -26,16 +27,16 @@ class ChunkStore:
     def _path(self, index: int) -> Path:
         return self.folder / f"chunk_{index:06d}.npz"
 
-    def load(self, index: int) -> dict[str, np.ndarray] | None:
+    def load(self, index: int) -> Chunk | None:
         path = self._path(index)
         if not path.is_file():
             return None
         with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+            return Chunk.from_arrays({k: data[k] for k in data.files})
 
-    def save(self, index: int, arrays: dict[str, np.ndarray]) -> None:
+    def save(self, index: int, chunk: Chunk) -> None:
         buffer = io.BytesIO()
-        np.savez(buffer, **arrays)
+        np.savez(buffer, **chunk.arrays())
         atomic_write_bytes(self._path(index), buffer.getvalue())
 
     def clear(self) -> None:

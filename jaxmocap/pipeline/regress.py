@@ -11,6 +11,7 @@ from jaxmocap.integrate import copy_paste, fit
 from jaxmocap.pipeline.exemplar import fine_tuned_bodies
 from jaxmocap.pipeline.hand_boxes import hand_boxes_from_body
 from jaxmocap.pipeline.observe import Observations
+from jaxmocap.pipeline.records import Bodies
 from jaxmocap.regressors import Predictor, crops, decode_bodies, decode_hands, load, predict_bodies, predict_hands
 from smplx_jax import constants
 from smplx_jax.rotations import rotmat_to_rotvec
@@ -72,10 +73,11 @@ def _regress(model, reg: Regression, frames, obs: Observations, rows, eft: bool)
     return pasted, np.asarray(scale), np.asarray(trans), body_ok, hand_boxes
 
 
-def solve_regressors(model, reg: Regression, frames, obs: Observations, integration: str, iterations: int) -> dict:
-    """Per-frame parameters and camera for one chunk: regressors (the body fine-tuned per frame with
-    ``integration == "eft"``) + copy-and-paste (+ the fit with ``integration == "optimize"``), and the hand boxes
-    the hand regressor used."""
+def regressed_bodies(model, reg: Regression, frames, obs: Observations, integration: str, iterations: int
+                     ) -> tuple[Bodies, np.ndarray]:
+    """Per-frame bodies of one chunk from the regressors (the body fine-tuned per frame with ``integration ==
+    "eft"``) + copy-and-paste (+ the fit with ``integration == "optimize"``), and the hand boxes (N, 2, 4) the hand
+    regressor used."""
     parts = [_regress(model, reg, frames, obs, np.arange(s, min(s + FRAMES_PER_BATCH, len(frames))),
                       integration == "eft")
              for s in range(0, len(frames), FRAMES_PER_BATCH)]
@@ -87,5 +89,4 @@ def solve_regressors(model, reg: Regression, frames, obs: Observations, integrat
                      camera_trans=np.where(ok[:, None], trans, 0.0), iterations=iterations)
         params, scale, trans = result.params, np.asarray(result.camera_scale), np.asarray(result.camera_trans)
         ok = ok & np.asarray(result.valid)
-    arrays = {k: np.asarray(v) for k, v in vars(params).items()}
-    return arrays | {"camera_scale": scale, "camera_trans": trans, "valid": ok, "hand_boxes": hand_boxes}
+    return Bodies(jax.tree.map(np.asarray, params), scale, trans, ok), hand_boxes

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
+import jax
 import numpy as np
 
 import smplx_jax
 from jaxmocap.detect.openpose import read_openpose_json
 from jaxmocap.errors import InputError
 from jaxmocap.integrate import fitting
-from jaxmocap.integrate.motion import fitted_motion
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import motion_params, read_motion, write_motion
+from jaxmocap.pipeline.records import Bodies
+from jaxmocap.pipeline.stages import motion_arrays, smoothed
 
 
 def read_keypoint_folder(folder) -> tuple[list[Path], np.ndarray]:
@@ -45,6 +48,15 @@ def read_keypoint_folder(folder) -> tuple[list[Path], np.ndarray]:
         if seen[pick].any():
             last = centres[pick]
     return files, out
+
+
+def keypoints_by_frame(folder) -> dict[int, np.ndarray]:
+    """OpenPose JSON of one tracked person by frame number (from ``<stem>_<frame:012d>_keypoints.json`` names,
+    else by sorted order); unseen keypoints are zeros."""
+    files, keypoints = read_keypoint_folder(folder)
+    numbers = [re.search(r"_(\d{12})_keypoints\.json$", f.name) for f in files]
+    frames = [int(m.group(1)) for m in numbers] if all(numbers) else range(len(files))
+    return dict(zip(frames, np.where(np.isfinite(keypoints), keypoints, 0.0)))
 
 
 def infer_image_size(keypoints: np.ndarray) -> tuple[int, int]:
@@ -88,8 +100,9 @@ def fit_keypoint_folder(keypoints_dir, out_dir, *, model_path=None, iterations: 
     finally:
         if bar is not None:
             bar.close()
-    motion = fitted_motion(model, result.params, result.camera_scale, result.camera_trans, result.valid, keypoints,
-                           smooth)
+    bodies = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
+                    np.asarray(result.camera_trans), np.asarray(result.valid))
+    motion = motion_arrays(model, smoothed(bodies) if smooth else bodies, keypoints)
     size = image_size if image_size else infer_image_size(keypoints)
     return write_motion(Path(out_dir) / "motion.npz", motion | {
         "fps": np.asarray(fps), "image_size": np.asarray(size), "model_sha256": np.asarray(file_sha256(model_path))})

@@ -1,0 +1,93 @@
+"""`RunConfig`: every option of a run, built by the ``jaxmocap run`` and ``jaxmocap demo`` commands alike."""
+
+import dataclasses
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from jaxmocap.errors import InputError
+
+INTEGRATIONS = ("optimize", "copy-paste", "eft")
+HAND_BOXES = ("keypoints", "body")
+EXPORT_FILES = {"bvh": "motion.bvh", "gltf": "motion.glb"}
+AT_THE_END = {"chunks": False}  # field metadata: an option used only after the last chunk, so stored chunks stay
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """``jaxmocap run SOURCE [options]`` as one value: ``run(RunConfig(source, ...), out_dir)``.
+
+    ``source``: a video file, image folder, single image or webcam index. ``model``: an SMPL-X model file (default:
+    the built-in one). ``weights``: FrankMocap's converted regressors (from ``convert-frankmocap``); without them the
+    embedded default path (detector landmarks -> IK -> fit). ``integration``: ``optimize`` (the fit), or with
+    ``weights`` ``copy-paste`` or ``eft`` (the body regressor fine-tuned per frame). ``hand_boxes``: hand crops from
+    the detector's ``keypoints``, or (with ``weights``) from the ``body`` regressor's projected hands (FrankMocap's
+    fast mode). ``keypoints``: a folder of OpenPose JSON to fit to instead of the detector's 2D keypoints.
+    ``start``/``end``/``stride``: the frames used. ``chunk_size``: frames per resumable chunk. ``iterations``: fit
+    iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``smooth``: temporal
+    smoothing; ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``: the outputs besides ``motion.npz``.
+
+    A stored chunk is reused only under the same options (`chunk_key`), except those marked `AT_THE_END`.
+    """
+
+    source: str | Path
+    model: Path | None = None
+    weights: Path | None = None
+    integration: str = "optimize"
+    hand_boxes: str = "keypoints"
+    keypoints: Path | None = None
+    start: int = 0
+    end: int | None = None
+    stride: int = 1
+    chunk_size: int = 128
+    iterations: int = 20
+    focal_length: float | None = None
+    smooth: bool = field(default=True, metadata=AT_THE_END)
+    overlay: bool = field(default=True, metadata=AT_THE_END)
+    exports: tuple[str, ...] = field(default=(), metadata=AT_THE_END)
+    frankmocap_pkl: bool = field(default=False, metadata=AT_THE_END)
+    progress: bool = field(default=True, metadata=AT_THE_END)
+
+    def __post_init__(self):
+        if self.integration not in INTEGRATIONS:
+            raise InputError(f"unknown integration {self.integration!r} ({', '.join(INTEGRATIONS)})")
+        if self.integration != "optimize" and self.weights is None:
+            raise InputError(f"--integration {self.integration} needs --weights (the regressors); the default path "
+                             f"optimizes")
+        if self.hand_boxes not in HAND_BOXES:
+            raise InputError(f"unknown hand boxes {self.hand_boxes!r} ({' or '.join(HAND_BOXES)})")
+        if self.hand_boxes == "body" and self.weights is None:
+            raise InputError("--hand-boxes body needs --weights (the body regressor gives the hand boxes)")
+        if self.focal_length is not None and not self.focal_length > 0:
+            raise InputError(f"--focal-length must be positive, got {self.focal_length}")
+        for name in ("chunk_size", "iterations", "stride"):
+            if getattr(self, name) < (0 if name == "iterations" else 1):
+                raise InputError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
+        unknown = sorted(set(self.exports) - set(EXPORT_FILES))
+        if unknown:
+            raise InputError(f"unknown export format(s) {', '.join(unknown)} (known: {', '.join(EXPORT_FILES)})")
+        object.__setattr__(self, "exports", tuple(self.exports))
+
+    @property
+    def webcam(self) -> bool:
+        return str(self.source).isdigit()
+
+
+def chunk_key(config: RunConfig, model_sha256: str) -> dict:
+    """What a stored chunk depends on: every option but those marked `AT_THE_END`, with each input named by its
+    place and content (the model by its hash; files and folders by their names, sizes and modification times)."""
+    key = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if f.metadata != AT_THE_END}
+    for name in ("source", "weights", "keypoints"):
+        if key[name] is not None and not (name == "source" and config.webcam):
+            key[name] = _fingerprint(key[name])
+    return {k: str(v) if isinstance(v, Path) else v for k, v in key.items()} | {"model": model_sha256}
+
+
+def _fingerprint(path) -> str:
+    path = Path(path).resolve()
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path] if path.exists() else []
+    stats = hashlib.sha256()
+    for f in files:
+        stat = f.stat()
+        stats.update(f"{f.relative_to(path) if path.is_dir() else f.name} {stat.st_size} {stat.st_mtime_ns}\n".encode())
+    return f"{path} {stats.hexdigest()[:16]}"

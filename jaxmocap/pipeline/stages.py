@@ -1,0 +1,89 @@
+"""The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector) -> `initial_bodies` (IK
+from the 3D landmarks) -> `fitted_bodies` (the fit to the 2D keypoints); with FrankMocap's weights the regressors
+(`regress.regressed_bodies`) stand in for the middle two. Over the whole sequence: `smoothed` -> `motion_arrays`
+(what ``motion.npz`` holds); then the outputs (`outputs`)."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import smplx_jax
+from jaxmocap.detect import Detector
+from jaxmocap.integrate import FitConfig, body_from_blazepose, fit, fitted_motion, hand_into_body
+from jaxmocap.integrate.camera import default_focal_length
+from jaxmocap.integrate.fitting import params_from_full_pose
+from jaxmocap.integrate.smooth import smooth_camera, smooth_params
+from jaxmocap.pipeline.observe import Observations, observe, repaired
+from jaxmocap.pipeline.records import Bodies
+
+Lens = tuple[float, np.ndarray] | tuple[None, None]  # a pinhole camera's (focal_length, principal_point), or none
+
+
+def observations(detector: Detector, frames: list[np.ndarray], fps: float | None,
+                 given_keypoints: np.ndarray | None = None) -> Observations:
+    """The detector's person in each frame (tracked across them); in a video (``fps`` given) with left and right
+    put back where it exchanged them and hands lost for a moment interpolated; ``given_keypoints`` (N, 67, 3)
+    replace its 2D keypoints as the fit's targets."""
+    detector.reset()
+    obs = observe(detector, frames)
+    if fps is not None:
+        obs = repaired(obs, fps)
+    if given_keypoints is not None:
+        obs = dataclasses.replace(obs, keypoints=given_keypoints)
+    return obs
+
+
+def initial_bodies(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SMPLXParams:
+    """The fit's start for each frame: IK of the body to BlazePose's world landmarks, then of each hand to its
+    landmarks with the body fixed (batched `SMPLXParams`)."""
+    theta, betas, _, _ = body_from_blazepose(model, obs.body_world)
+    for side, name in enumerate(("left", "right")):
+        conf = np.repeat(obs.hands_conf[:, side:side + 1] > 0, 21, axis=1).astype(np.float32)
+        theta, betas, _, _ = hand_into_body(model, name, obs.hands_world[:, side], theta, betas, conf=conf)
+    return jax.block_until_ready(params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression))
+
+
+# The fit from the IK start: the start already holds BlazePose's 3D (depth, twists) that the 2D keypoints do not see,
+# so the prior keeps the fit near it (0.1 m/rad; the generic fit's 0.02 lets depth drift: 3D error up on real
+# footage, docs/BENCHMARKS.md).
+FIT_FROM_IK = FitConfig(prior_body=0.1, prior_finger_hinge=0.05, prior_finger_range=0.2)
+
+
+def lens_of(image_size: tuple[int, int], focal_length: float | None = None) -> Lens:
+    """The pinhole camera of a run: ``focal_length`` pixels (default `default_focal_length`), centred on the image
+    of ``image_size`` (width, height)."""
+    return focal_length or default_focal_length(image_size), np.asarray(image_size, np.float32) / 2
+
+
+def fitted_bodies(model: smplx_jax.BodyModel, obs: Observations, init: smplx_jax.SMPLXParams, lens: Lens,
+                  iterations: int = 20) -> Bodies:
+    """The fit of each frame to its 2D keypoints from ``init`` through the pinhole camera ``lens``; valid where the
+    person was found and the fit succeeded."""
+    result = jax.block_until_ready(fit(model, obs.keypoints, init=init, focal_length=lens[0],
+                                       principal_point=lens[1], iterations=iterations, config=FIT_FROM_IK))
+    return Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
+                  np.asarray(result.camera_trans), obs.found & np.asarray(result.valid))
+
+
+_SMOOTH = jax.jit(smooth_params)
+
+
+def smoothed(bodies: Bodies) -> Bodies:
+    """Rotations (as quaternions), shape, translation and camera filtered over time across valid frames
+    (`jaxmocap.integrate.smooth`); invalid frames are left as they are."""
+    if not bodies.valid.any():
+        return bodies
+    valid = jnp.asarray(bodies.valid)
+    scale, trans = smooth_camera(jnp.asarray(bodies.camera_scale), jnp.asarray(bodies.camera_trans), valid)
+    return Bodies(jax.tree.map(np.asarray, _SMOOTH(bodies.params, valid)), np.asarray(scale), np.asarray(trans),
+                  bodies.valid)
+
+
+def motion_arrays(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens = (None, None)
+                  ) -> dict[str, np.ndarray]:
+    """``motion.npz``'s per-frame arrays (and the pinhole camera's keys when ``lens`` has one), with the
+    reprojection errors of the parameters stored."""
+    return fitted_motion(model, bodies.params, bodies.camera_scale, bodies.camera_trans, bodies.valid, keypoints_2d,
+                         *lens)
