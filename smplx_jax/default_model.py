@@ -1,5 +1,5 @@
 """The license-free default body model: a human-shaped model in the official SMPL-X file layout, generated
-deterministically by code (numpy only, about a second), so that every code path and the PyTorch ``smplx``
+deterministically by code (numpy only, cached after the first use), so that every code path and the PyTorch ``smplx``
 package run without the licensed SMPL-X files.
 
     path = default_model_path()                    # .../default_model/v1-<hash>/smplx/SMPLX_NEUTRAL.npz
