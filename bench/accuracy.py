@@ -1,6 +1,7 @@
-"""Accuracy on real footage (DESIGN 2.5): monocular runs on views of Pose2Sim's single-person take, scored against
-the multi-view 3D reference beside BlazePose's own monocular 3D (the world landmarks the fit starts from), stage
-by stage: BlazePose, the IK start, the fit, the smoothed motion (what ``jaxmocap run`` writes).
+"""Accuracy on real footage (docs/BENCHMARKS.md, "Accuracy on real footage"): monocular runs on views of Pose2Sim's
+single-person take, scored against the multi-view 3D reference beside BlazePose's own monocular 3D (the world
+landmarks the fit starts from), stage by stage: BlazePose, the IK start, the fit, the smoothed motion (what
+``jaxmocap run`` writes).
 
     python bench/accuracy.py [--views cam01 cam03] [--out bench/results] [--sheet docs/accuracy_worst_frames.png]
     (or: jaxmocap bench --only accuracy)
@@ -34,7 +35,8 @@ DATA = ROOT / "tests" / "data"
 VIEWS = {"cam01": ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4",
          "cam03": DATA / "pose2sim_single_cam03.mp4"}
 REFERENCE = DATA / "pose2sim_single_reference_3d.npz"
-SMPLX_LIMB_JOINTS = (16, 17, 18, 19, 20, 21, 1, 2, 4, 5, 7, 8)  # the reference's order (DESIGN 2.5)
+# SMPL-X joints in the reference's order: L/R shoulder, elbow, wrist, hip, knee, ankle
+SMPLX_LIMB_JOINTS = (16, 17, 18, 19, 20, 21, 1, 2, 4, 5, 7, 8)
 BLAZEPOSE_LIMB_LANDMARKS = (11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28)
 MIN_JOINTS = 8
 # (proximal, middle, distal) of the reference's order: L/R knee, L/R elbow

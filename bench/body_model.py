@@ -22,9 +22,9 @@ import numpy as np
 
 def _time_in_rounds(fns, min_seconds, block_seconds=0.3, warm_seconds=0.1, min_rounds=3):
     """Median seconds per call of each function at its steady state. In each round every function runs back to
-    back: calls for ``warm_seconds`` untimed (a call right after another workload or a pause runs up to 2x
-    slower here: threads and caches are cold), then timed calls for ``block_seconds``; rounds repeat so that all
-    see the same machine load."""
+    back: calls for ``warm_seconds`` untimed (a call right after another workload or a pause runs slower:
+    threads and caches are cold; docs/BENCHMARKS.md, "Body model"), then timed calls for ``block_seconds``; rounds
+    repeat so that all see the same machine load."""
     for fn in fns:  # compilation for JAX
         fn()
     times = [[] for _ in fns]

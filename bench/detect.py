@@ -1,15 +1,16 @@
 """Detector speed in tracking (video) mode, ours vs official mediapipe 0.10.21, on the bundled Pose2Sim clip.
 
-    python bench/detect.py [--out bench/results] [--quick] [--frames N] [--mediapipe-python mp/bin/python]
+    python bench/detect.py [--out bench/results] [--quick] [--frames N] [--mediapipe-python PATH]
 
 Ours: ``jaxmocap.detect.Detector(static_image_mode=False)`` (pose + hands, LiteRT, 2 threads). Peer: the legacy
 ``mp.solutions.holistic.Holistic`` (pose + hands, face off is impossible in legacy holistic, so also
 ``mp.solutions.pose`` + ``mp.solutions.hands`` run one after the other), in the mediapipe venv as a subprocess, same
 frames, same machine, same run. Prints a table and writes ``<out>/detect.json``.
 
-The peer needs its own environment (mediapipe 0.10.21 pins numpy<2), created once in the repository root with
-``python3 -m venv mp && mp/bin/pip install mediapipe==0.10.21`` (about 90 s); ``--mediapipe-python`` or
-``$JAXMOCAP_MEDIAPIPE_PYTHON`` point elsewhere. Without it the peer's rows read "n/a".
+The peer needs an environment of its own, outside the clone (mediapipe 0.10.21 pins numpy<2 and cannot share
+jaxmocap's): ``python3 -m venv ~/venvs/mediapipe && ~/venvs/mediapipe/bin/pip install mediapipe==0.10.21``, then
+``--mediapipe-python ~/venvs/mediapipe/bin/python`` or ``JAXMOCAP_MEDIAPIPE_PYTHON=~/venvs/mediapipe/bin/python``
+(docs/BENCHMARKS.md, "Detector"). Without either, the peer's rows read "n/a" and a line says how to make it.
 """
 
 from __future__ import annotations
@@ -57,6 +58,27 @@ print(json.dumps({"version": mp.__version__, "results": out}))
 """
 
 
+MEDIAPIPE_VERSION = "0.10.21"
+MEDIAPIPE_ENV = "JAXMOCAP_MEDIAPIPE_PYTHON"
+SETUP = (f"Make the peer's environment outside the clone with `python3 -m venv ~/venvs/mediapipe && "
+         f"~/venvs/mediapipe/bin/pip install mediapipe=={MEDIAPIPE_VERSION}` and pass "
+         f"`--mediapipe-python ~/venvs/mediapipe/bin/python` or set {MEDIAPIPE_ENV}.")
+
+
+def mediapipe_python(given: str | None) -> str | None:
+    """The peer's Python: ``given`` (the option, else ``$JAXMOCAP_MEDIAPIPE_PYTHON``); None, with a line that says
+    how to make it, when neither is set; exits with a one-line error when the path given is not a file."""
+    if not given:
+        print(f"mediapipe peer skipped: no --mediapipe-python and no ${MEDIAPIPE_ENV}; its rows read n/a. {SETUP}",
+              file=sys.stderr)
+        return None
+    path = Path(given).expanduser()
+    if not path.is_file():
+        raise SystemExit(f"bench/detect.py: the mediapipe Python {given} (--mediapipe-python or ${MEDIAPIPE_ENV}) "
+                         f"does not exist. {SETUP}")
+    return str(path)
+
+
 def read_frames(n: int):
     import cv2
 
@@ -91,9 +113,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     parser.add_argument("--quick", action="store_true", help="30 frames")
     parser.add_argument("--frames", type=int, default=100)
-    parser.add_argument("--mediapipe-python",
-                        default=os.environ.get("JAXMOCAP_MEDIAPIPE_PYTHON", str(ROOT / "mp" / "bin" / "python")))
+    parser.add_argument("--mediapipe-python", metavar="PATH", default=os.environ.get(MEDIAPIPE_ENV) or None,
+                        help=f"the Python of a venv with mediapipe=={MEDIAPIPE_VERSION} (default: ${MEDIAPIPE_ENV})")
     args = parser.parse_args()
+    peer_python = mediapipe_python(args.mediapipe_python)
     frames = read_frames(30 if args.quick else args.frames)
     rows = {}
     ms, bodies, hands = time_ours(frames, hands=True)
@@ -101,13 +124,13 @@ def main() -> None:
     ms, bodies, _ = time_ours(frames, hands=False)
     rows["jaxmocap pose (tracking)"] = {"ms_per_frame": ms, "frames_with_body": bodies}
     peer = {"version": None, "results": {}}
-    if os.path.exists(args.mediapipe_python):
-        proc = subprocess.run([args.mediapipe_python, "-c", PEER, str(CLIP), str(len(frames))],
-                              capture_output=True, text=True)
+    if peer_python is not None:
+        proc = subprocess.run([peer_python, "-c", PEER, str(CLIP), str(len(frames))], capture_output=True, text=True)
         if proc.returncode == 0:
             peer = json.loads(proc.stdout.strip().splitlines()[-1])
         else:
-            print("mediapipe peer failed:", proc.stderr.strip().splitlines()[-1:], file=sys.stderr)
+            last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+            print(f"mediapipe peer failed in {peer_python} ({last}); its rows read n/a. {SETUP}", file=sys.stderr)
     for name in ("holistic", "pose+hands", "pose"):
         value = peer["results"].get(name)
         rows[f"mediapipe {peer['version'] or ''} {name} (video mode)".replace("  ", " ")] = (

@@ -23,7 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 
 GFLOP_PER_IMAGE = 8.2  # ResNet-50 at 224x224: 4.1 GMAC; the heads add < 0.1%
-PEAK_GFLOPS = {"torch f32": 186.0, "torch bf16": 532.0, "jax f32": 126.0}  # matmul peaks measured on this machine
+# matmul peaks measured on the machine of docs/BENCHMARKS.md ("Regressors"); elsewhere the shares are relative to them
+PEAK_GFLOPS = {"torch f32": 186.0, "torch bf16": 532.0, "jax f32": 126.0}
 _PEAK = {"torch_f32": "torch f32", "jax_f32": "jax f32", "jax_f32_mb8": "jax f32", "jax_bf16_mb8": "torch bf16"}
 
 
@@ -119,7 +120,8 @@ def main():
         best = max(names[1:3], key=lambda n: r[n])
         print(f"{r['network']:>5} {r['batch']:>5} " + " ".join(f"{r[n]:>18.2f}" for n in names)
               + f"   {r[best] / r['torch_f32']:.2f}x ({best})")
-    print("GFLOP/s (share of the measured matmul peak: torch f32 186, jax f32 126, bf16 532); max |diff| to torch")
+    peaks = ", ".join(f"{name} {value:.0f}" for name, value in PEAK_GFLOPS.items())
+    print(f"GFLOP/s (share of the matmul peak: {peaks}); max |diff| to torch")
     for r in rows:
         print(f"{r['network']:>5} {r['batch']:>5} " + " ".join(
             f"{n}: {r[n] * GFLOP_PER_IMAGE:.0f} ({r[n] * GFLOP_PER_IMAGE / PEAK_GFLOPS[_PEAK[n]]:.0%})" for n in names)

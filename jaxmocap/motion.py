@@ -1,4 +1,4 @@
-"""``motion.npz``: one tracked person over ``T`` frames (DESIGN 2.3), checked on write and on read.
+"""``motion.npz``: one tracked person over ``T`` frames (docs/formats.md, "motion.npz"), checked on write and on read.
 
 With ``X = smplx_forward(params).joints`` (``transl`` included) the pixel of a joint in frame ``t`` is
 ``camera_scale[t] * X[..., :2] + camera_trans[t]`` (x right, y down). Hand poses are absolute.

@@ -1,5 +1,5 @@
 """The license-free default body model: a human-shaped model in the official SMPL-X file layout, generated
-deterministically by code (numpy only, about a second), so that every code path and the PyTorch ``smplx``
+deterministically by code (numpy only, cached after the first use), so that every code path and the PyTorch ``smplx``
 package run without the licensed SMPL-X files.
 
     path = default_model_path()                    # .../default_model/v1-<hash>/smplx/SMPLX_NEUTRAL.npz
@@ -21,8 +21,7 @@ from pathlib import Path
 import numpy as np
 
 GENERATOR_VERSION = 1
-_SOURCES = ("assemble.py", "body.py", "cage.py", "hands.py", "head.py", "rig.py", "skeleton.py", "subdiv.py",
-            "surface.py")
+_GENERATOR_DIR = Path(__file__).parent / "_default"
 
 
 def build_default_model() -> dict[str, np.ndarray]:
@@ -50,12 +49,21 @@ def write_default_model(path) -> Path:
     return path
 
 
+def _generator_files(folder: Path) -> list[Path]:
+    """Every file of the generator's folder (code and any data, subfolders included), sorted; Python's
+    byte-code caches left out."""
+    return sorted(p for p in folder.rglob("*")
+                  if p.is_file() and "__pycache__" not in p.parts and p.suffix not in (".pyc", ".pyo"))
+
+
 def generator_id() -> str:
-    """Version and source hash of the generator: a new generator gets a new cache folder."""
+    """Version and hash of every file of ``smplx_jax/_default`` (names and contents): editing, adding, removing
+    or renaming any of them gives a new cache folder."""
     h = hashlib.sha256()
-    folder = Path(__file__).parent / "_default"
-    for name in _SOURCES:
-        h.update((folder / name).read_bytes())
+    for path in _generator_files(_GENERATOR_DIR):
+        name = path.relative_to(_GENERATOR_DIR).as_posix().encode()
+        data = path.read_bytes()
+        h.update(len(name).to_bytes(8, "little") + name + len(data).to_bytes(8, "little") + data)
     return f"v{GENERATOR_VERSION}-{h.hexdigest()[:10]}"
 
 

@@ -228,6 +228,35 @@ def test_deterministic_and_cached(m, tmp_path, monkeypatch):
     assert [p.name for p in (tmp_path / "x").iterdir()] == ["m.npz"]
 
 
+def test_generator_id_covers_every_file(tmp_path, monkeypatch):
+    """The cache key hashes every file of ``smplx_jax/_default`` (no hand list): editing, adding or renaming any
+    file, data included, changes it; byte-code caches do not."""
+    import shutil
+
+    from smplx_jax import default_model
+
+    copy = tmp_path / "_default"
+    shutil.copytree(default_model._GENERATOR_DIR, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(default_model, "_GENERATOR_DIR", copy)
+    base = default_model.generator_id()
+    assert base.startswith(f"v{default_model.GENERATOR_VERSION}-")
+    ids = {base}
+    for name in sorted(p.name for p in copy.glob("*.py")):
+        with open(copy / name, "a") as fh:
+            fh.write("\n# edited\n")
+        ids.add(default_model.generator_id())
+    assert len(ids) == 1 + len(list(copy.glob("*.py")))
+    (copy / "table.npy").write_bytes(b"\x00")
+    ids.add(default_model.generator_id())
+    (copy / "table.npy").rename(copy / "table2.npy")
+    ids.add(default_model.generator_id())
+    assert len(ids) == 3 + len(list(copy.glob("*.py")))
+    before = default_model.generator_id()
+    (copy / "__pycache__").mkdir()
+    (copy / "__pycache__" / "body.cpython-311.pyc").write_bytes(b"x")
+    assert default_model.generator_id() == before
+
+
 def test_smplx_package_runs_on_it():
     torch = pytest.importorskip("torch")
     smplx = pytest.importorskip("smplx")

@@ -29,8 +29,9 @@ def reference_hand_bboxes(joints_img, img_shape):
 
 @pytest.fixture(scope="module")
 def projected(default_model_dir):
-    """A posed body's 127 joints in pixels (DESIGN 2.3 camera, y flipped by the global orientation), at three
-    placements: centred, shifted so the right hand crosses the left edge, and missing (NaN)."""
+    """A posed body's 127 joints in pixels (weak perspective, docs/formats.md, "Coordinates and cameras"; y flipped
+    by the global orientation), at three placements: centred, shifted so the right hand crosses the left edge, and
+    missing (NaN)."""
     model = smplx_jax.load_model(default_model_dir / "smplx" / "SMPLX_NEUTRAL.npz")
     params = example_pose(model.num_betas, model.num_expression).replace(global_orient=np.array([np.pi, 0.0, 0.0]))
     joints = np.asarray(jax.jit(smplx_jax.forward_joints)(model, params))

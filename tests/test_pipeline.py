@@ -143,7 +143,7 @@ def test_frankmocap_pickles_reproduce_the_projection(result):
 
 
 def smplx_joints(motion):
-    """The motion's 127 joints per frame by the PyTorch smplx package (DESIGN 2.3)."""
+    """The motion's 127 joints per frame by the PyTorch smplx package (docs/formats.md, "motion.npz")."""
     frames = len(motion["valid"])
     body = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
                         flat_hand_mean=True, num_betas=motion["betas"].shape[1], batch_size=frames)

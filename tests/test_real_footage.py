@@ -1,5 +1,6 @@
 """Real footage with a 3D reference: 20 frames of Pose2Sim's oblique view from above and behind (`cam03`), run as a
-user runs it and scored as `bench/accuracy.py` scores it (DESIGN 2.5), beside BlazePose's own monocular 3D."""
+user runs it and scored as `bench/accuracy.py` scores it (docs/BENCHMARKS.md, "Accuracy on real footage"), beside
+BlazePose's own monocular 3D."""
 
 import pytest
 

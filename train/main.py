@@ -21,14 +21,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", help="SMPL-X model file (default: the built-in body model)")
     parser.add_argument("--distributed", action="store_true", help="call jax.distributed.initialize() first")
     args = parser.parse_args(argv)
+    try:
+        config = configs.override(configs.get(args.config), args.set)
+    except ValueError as err:
+        parser.exit(2, f"{parser.prog}: error: {err}\n")
     if args.distributed:
         jax.distributed.initialize()
     from train.train import train_and_evaluate  # after initialize: it touches devices
 
-    try:
-        config = configs.override(configs.get(args.config), args.set)
-    except ValueError as err:
-        parser.error(str(err))
     summary = train_and_evaluate(config, args.workdir, model_path=args.model)
     print(json.dumps(summary, indent=2))
     return 0

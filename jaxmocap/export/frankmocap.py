@@ -107,7 +107,7 @@ def _person(model_arrays, motion, t, joints, wrists, body_box, hand_boxes, image
 
 def write_frankmocap_pkls(out_dir, model: smplx_jax.BodyModel, motion: dict, body_boxes, hand_boxes,
                           image_paths) -> list[Path]:
-    """``out_dir/mocap/<stem>_prediction_result.pkl`` for every valid frame of ``motion`` (DESIGN 2.3) with a body
+    """``out_dir/mocap/<stem>_prediction_result.pkl`` for every valid frame of ``motion`` (docs/formats.md) with a body
     box. ``body_boxes`` (T, 4) and ``hand_boxes`` (T, 2, 4) left, right: x0, y0, x1, y1 pixels, NaN where missing;
     ``image_paths``: the image each frame is (FrankMocap names a video's frames ``frames/<frame:05d>.jpg``)."""
     frames = len(motion["valid"])

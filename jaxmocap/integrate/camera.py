@@ -1,7 +1,7 @@
-"""Cameras (DESIGN 2.3, x right, y down, z away from the camera): weak perspective ``pixel = camera_scale *
-X[..., :2] + camera_trans``, or a pinhole ``pixel = focal_length * X[..., :2] / X[..., 2:] + principal_point`` of
-camera-frame points (metres; what the fit of the default pipeline uses, motion.npz's ``focal_length`` and
-``principal_point``)."""
+"""Cameras (docs/formats.md, "Coordinates and cameras"; x right, y down, z away from the camera): weak
+perspective ``pixel = camera_scale * X[..., :2] + camera_trans``, or a pinhole
+``pixel = focal_length * X[..., :2] / X[..., 2:] + principal_point`` of camera-frame points (metres; what the fit
+of the default pipeline uses, motion.npz's ``focal_length`` and ``principal_point``)."""
 
 import jax.numpy as jnp
 from jaxtyping import Array, Float

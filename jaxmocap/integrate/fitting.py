@@ -43,9 +43,9 @@ FitConfig = least_squares.SolverConfig
 class FitResult(NamedTuple):
     """A fit: one frame from `fit_frame`, a leading axis T from `fit`. ``status``: 0 fitted, 1 too few
     keypoints, 2 numerical failure; frames with a non-zero status hold the initial parameters and camera.
-    ``camera_scale``, ``camera_trans``: the weak-perspective projection of the fitted body (``transl`` included,
-    DESIGN 2.3), for a pinhole camera the one closest to its projection. ``reprojection_error_px``: the fit's
-    own (perspective for a pinhole camera)."""
+    ``camera_scale``, ``camera_trans``: the weak-perspective projection of the fitted body (``transl`` included;
+    docs/formats.md, "Coordinates and cameras"), for a pinhole camera the one closest to its projection.
+    ``reprojection_error_px``: the fit's own (perspective for a pinhole camera)."""
 
     params: SMPLXParams
     camera_scale: Float[Array, "*T"]

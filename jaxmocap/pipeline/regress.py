@@ -39,7 +39,8 @@ def _xywh(boxes):
 
 
 def _pixel_camera(camera, window):
-    """The weak-perspective camera of DESIGN 2.3 (pixel = s X[:2] + t) equal to the body crop's camera."""
+    """The weak-perspective camera (pixel = s X[:2] + t; docs/formats.md, "Coordinates and cameras") equal to the
+    body crop's camera."""
     basis = jnp.broadcast_to(jnp.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), (camera.shape[0], 2, 3))
     pixels = crops.body_to_image(basis, camera, window)
     return pixels[:, 1, 0] - pixels[:, 0, 0], pixels[:, 0]

@@ -14,7 +14,7 @@ from jaxmocap.regressors.body import BodyOutput
 from jaxmocap.regressors.weights import Regressors
 
 BUCKETS = (1, 4, 16, 64)
-CPU_MICROBATCH = 8  # measured: batch 64 runs 1.3-1.5x faster as 8 chunks of 8 than in one piece on 2 cores
+CPU_MICROBATCH = 8  # batch 64 runs faster as 8 chunks of 8 than in one piece on CPUs (docs/BENCHMARKS.md, Regressors)
 
 
 @functools.partial(jax.jit, static_argnums=(0, 3))

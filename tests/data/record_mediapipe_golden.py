@@ -1,7 +1,7 @@
 """Record the official mediapipe 0.10.21 legacy solutions' landmarks on the test images (run in its own venv).
 
-    python3 -m venv /work/mpenv && /work/mpenv/bin/pip install mediapipe==0.10.21
-    /work/mpenv/bin/python tests/data/record_mediapipe_golden.py
+    python3 -m venv ~/venvs/mediapipe && ~/venvs/mediapipe/bin/pip install mediapipe==0.10.21
+    ~/venvs/mediapipe/bin/python tests/data/record_mediapipe_golden.py
 
 Writes ``tests/data/mediapipe_golden.json``: per image, the pose landmarks (33 × x, y in pixels, z, visibility) of
 ``mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1)`` and the hands (21 × x, y in pixels, z, with

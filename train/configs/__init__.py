@@ -6,6 +6,7 @@ and a docstring with the command that runs it and the result it gave.
 
 import dataclasses
 import importlib
+import typing
 from typing import Literal
 
 NAMES = ("hand", "body", "synthetic", "smoke")
@@ -48,18 +49,55 @@ def get(name: str) -> TrainConfig:
 
 
 def override(config: TrainConfig, assignments: list[str]) -> TrainConfig:
-    """``["batch_size=16", "dataset=rhd"]`` applied with each field's own type."""
+    """``["batch_size=16", "dataset=rhd"]`` applied, each value parsed as its field's type; a value that does not
+    parse is a one-line `ValueError` naming the field and the type it expects."""
     fields = {f.name: f for f in dataclasses.fields(config)}
+    hints = typing.get_type_hints(type(config))
     changes = {}
     for assignment in assignments:
         key, sep, value = assignment.partition("=")
         if not sep or key not in fields:
             raise ValueError(f"--set: expected FIELD=VALUE with FIELD one of {', '.join(fields)}, got {assignment!r}")
-        kind = type(getattr(config, key))
-        if kind is bool:
-            changes[key] = value.lower() in ("1", "true", "yes")
-        elif kind is tuple:
-            changes[key] = tuple(float(v) for v in value.split(","))
-        else:
-            changes[key] = kind(value)
+        changes[key] = _parse(key, hints[key], value)
     return config.replace(**changes)
+
+
+_BOOLS = {"true": True, "1": True, "yes": True, "on": True, "false": False, "0": False, "no": False, "off": False}
+
+
+def _parse(key: str, kind, value: str):
+    """``value`` as type ``kind`` (a field's annotation), or `ValueError` naming ``key`` and the type expected."""
+    def fail(expected: str):
+        return ValueError(f"--set {key}={value}: {key} expects {expected}, got {value!r}")
+
+    if typing.get_origin(kind) is Literal:
+        choices = typing.get_args(kind)
+        if value not in choices:
+            raise fail("one of " + ", ".join(map(str, choices)))
+        return value
+    if kind is bool:
+        if value.strip().lower() not in _BOOLS:
+            raise fail("a boolean (true/false, 1/0, yes/no)")
+        return _BOOLS[value.strip().lower()]
+    if kind is int:
+        try:
+            return int(value)
+        except ValueError:
+            raise fail("an integer") from None
+    if kind is float:
+        try:
+            return float(value)
+        except ValueError:
+            raise fail("a number") from None
+    if typing.get_origin(kind) is tuple:
+        items = typing.get_args(kind)
+        parts = value.split(",")
+        try:
+            if len(parts) != len(items):
+                raise ValueError
+            return tuple(item(part) for item, part in zip(items, parts))
+        except ValueError:
+            raise fail(f"{len(items)} comma-separated numbers") from None
+    if kind is str:
+        return value
+    raise fail(f"a {kind}")  # a field type this parser does not know

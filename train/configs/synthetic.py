@@ -1,11 +1,12 @@
-"""ResNet-18 hand regressor trained from scratch on the synthetic hands, on a 2-core CPU in 30 minutes.
+"""ResNet-18 hand regressor trained from scratch on the synthetic hands, on a 2-core CPU within a 30-minute budget
+(``time_limit_s``).
 
     python -m train.main --config synthetic --workdir runs/synthetic
 
-Result (2026-11-22, 2-core AMD EPYC, quiet): 2,000 steps of 32 crops (80x80) in 29 min; held-out synthetic hands
-(1,000, disjoint seeds): root-aligned MPJPE 31.4 mm against 63.3 mm for the untrained regressor, which predicts
-the mean pose (-50.4%); PA-MPJPE 16.2 -> 14.1 mm, 2D error 13.8 -> 4.5 crop px. Curves: docs/training_synthetic.png;
-details in docs/BENCHMARKS.md ("Training").
+Result (2026-11-22): held-out synthetic hands (1,000, disjoint seeds) after 2,000 steps of 32 crops (80x80, within
+the budget): root-aligned MPJPE 31.4 mm against 63.3 mm for the untrained regressor, which predicts the mean pose
+(-50.4%); PA-MPJPE 16.2 -> 14.1 mm, 2D error 13.8 -> 4.5 crop px. Curves: docs/training_synthetic.png; the
+machine, timings and details in docs/BENCHMARKS.md ("Training").
 """
 
 from train.configs import TrainConfig
