@@ -174,8 +174,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def use_compilation_cache() -> None:
     """Keep XLA's compiled programs on disk (``$JAXMOCAP_CACHE/xla``, at most 1 GiB, least recently used out), so
-    that a second run skips most compilation (the demo: 50 -> 22 s). ``JAX_COMPILATION_CACHE_DIR`` takes
-    precedence."""
+    that a second run skips most compilation (docs/BENCHMARKS.md, "End to end"). ``JAX_COMPILATION_CACHE_DIR``
+    takes precedence."""
     import jax
 
     from smplx_jax.default_model import cache_root
