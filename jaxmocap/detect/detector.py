@@ -11,6 +11,7 @@ from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models
 from .pose import PoseEstimator, PoseResult, landmark_box, rect_iou
+from .ssd import Detection, in_image, square_tiles
 
 SIDES = ("left", "right")
 
@@ -98,10 +99,21 @@ class Detector:
         self._frame = 0
 
     # -- body -------------------------------------------------------------------------------------------------
+    def _person_detections(self, image: np.ndarray) -> list[Detection]:
+        """The person detector on the whole (letterboxed) image and on squares along its long side, where people
+        are seen at twice the size or more, best first (duplicates of one person are left to the caller)."""
+        size = (image.shape[1], image.shape[0])
+        found = self._pose.detect(image, self.min_detection_confidence)
+        for x0, y0, side in square_tiles(size):
+            tile = image[y0:y0 + side, x0:x0 + side]
+            found += [in_image(d, (x0, y0, side), size)
+                      for d in self._pose.detect(tile, self.min_detection_confidence)]
+        return sorted(found, key=lambda d: -d.score)
+
     def _detect_people(self, image: np.ndarray, known: list[PoseResult]) -> list[PoseResult]:
         size = (image.shape[1], image.shape[0])
         found = list(known)
-        for det in self._pose.detect(image, self.min_detection_confidence):
+        for det in self._person_detections(image):
             if len(found) >= self.max_people:
                 break
             roi = self._pose.detection_roi(det, size)

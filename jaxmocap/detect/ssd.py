@@ -6,6 +6,7 @@ Numbers come from the calculator options of mediapipe 0.10.21's ``PoseDetectionC
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -100,3 +101,22 @@ def remove_letterbox(det: Detection, padding: tuple[float, float, float, float])
     box = (det.box - (left, top, left, top)) / (sx, sy, sx, sy)
     kps = (det.keypoints - (left, top)) / (sx, sy)
     return Detection(det.score, box, kps)
+
+
+def square_tiles(image_size: tuple[int, int]) -> list[tuple[int, int, int]]:
+    """Squares (x0, y0, side) of the image's short side along its long side, evenly spaced, neighbours
+    overlapping by half a side or more; none for an image within 1.25:1 of square (the whole image is one)."""
+    w, h = image_size
+    side, length = min(w, h), max(w, h)
+    if length < 1.25 * side:
+        return []
+    starts = np.linspace(0, length - side, math.ceil(2 * (length - side) / side) + 1).round()
+    return [(0, int(s), side) if h > w else (int(s), 0, side) for s in starts]
+
+
+def in_image(det: Detection, tile: tuple[int, int, int], image_size: tuple[int, int]) -> Detection:
+    """A detection made on the square ``tile`` (x0, y0, side) of an image, normalized to the whole image."""
+    x0, y0, side = tile
+    w, h = image_size
+    scale, offset = np.array([side / w, side / h]), np.array([x0 / w, y0 / h])
+    return Detection(det.score, det.box * np.tile(scale, 2) + np.tile(offset, 2), det.keypoints * scale + offset)
