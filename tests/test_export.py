@@ -1,6 +1,7 @@
 """BVH and glTF exports: they parse, have the motion's frames, and reproduce the model's skeleton and mesh."""
 
 import json
+import shutil
 import struct
 
 import jax
@@ -176,6 +177,20 @@ def test_gltf_is_valid_and_skins_like_the_model(case, tmp_path):
         blended = np.einsum("vk,vkij->vij", weights, mats[joints.astype(int)])
         skinned = np.einsum("vij,vj->vi", blended[:, :3, :3], positions) + blended[:, :3, 3]
         np.testing.assert_allclose(skinned, _expected_world(vertices[frame], motion, frame), atol=2e-5)
+
+
+def test_gltf_passes_the_khronos_validator(case, tmp_path):
+    """The Khronos reference validator (npm ``gltf-validator``, installed into the cache on first use) finds no
+    error, warning, info or hint in either form of the export."""
+    if shutil.which("npm") is None:
+        pytest.skip("npm is not on PATH: the Khronos glTF validator cannot be installed (apt-get install nodejs npm)")
+    from bench import gltf_validate
+
+    model, _, motion = case
+    anim = animation(model, motion, focal_px=FOCAL)
+    paths = [write_gltf(tmp_path / name, model, anim) for name in ("motion.glb", "motion.gltf")]
+    for path, report in zip(paths, gltf_validate.validate(*paths)):
+        assert all(report["issues"][k] == 0 for k in gltf_validate.COUNTS), (path.name, gltf_validate.summary(report))
 
 
 def test_export_command(case, tmp_path, capsys):
