@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 GENERATOR_VERSION = 1
+_SHARED_SOURCES = ("geometry.py",)  # modules of smplx_jax, outside _default, that the generator uses
 _SOURCES = ("assemble.py", "body.py", "cage.py", "hands.py", "head.py", "rig.py", "skeleton.py", "subdiv.py",
             "surface.py")
 
@@ -56,6 +57,8 @@ def generator_id() -> str:
     folder = Path(__file__).parent / "_default"
     for name in _SOURCES:
         h.update((folder / name).read_bytes())
+    for name in _SHARED_SOURCES:
+        h.update((folder.parent / name).read_bytes())
     return f"v{GENERATOR_VERSION}-{h.hexdigest()[:10]}"
 
 

@@ -16,6 +16,7 @@ import numpy as np
 import smplx_jax
 from jaxmocap.export.animation import Animation
 from jaxmocap.io import atomic_write_bytes, atomic_write_text
+from smplx_jax.geometry import vertex_normals
 from smplx_jax.rotations import rotmat_to_quat
 
 FLOAT, USHORT, UINT = 5126, 5123, 5125
@@ -27,15 +28,6 @@ def rest_mesh(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
     """(V, 3) rest-pose vertices of a shape."""
     offsets = betas @ np.asarray(model.shapedirs_cm)[: len(betas)]
     return (np.asarray(model.template_cm, np.float64) + offsets.reshape(3, -1)).T
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    tri = vertices[faces]
-    face_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, faces[:, k], face_normals)
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
 
 
 def top_weights(weights: np.ndarray, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
