@@ -232,7 +232,7 @@ def test_gltf_passes_the_khronos_validator(case, tmp_path):
     error, warning, info or hint in either form of the export."""
     if shutil.which("npm") is None:
         pytest.skip("npm is not on PATH: the Khronos glTF validator cannot be installed (apt-get install nodejs npm)")
-    from bench import gltf_validate
+    from bench.checks import gltf_validate
 
     model, _, motion = case
     anim = animation(model, motion, focal_px=FOCAL)

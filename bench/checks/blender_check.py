@@ -9,7 +9,7 @@ imports with no zero-length bone, warning or error.
 separate virtual environment, not in the project's:
 
     python3.11 -m venv /tmp/bpyenv && /tmp/bpyenv/bin/pip install bpy
-    /tmp/bpyenv/bin/python bench/blender_check.py out/motion.bvh out/motion.glb
+    /tmp/bpyenv/bin/python bench/checks/blender_check.py out/motion.bvh out/motion.glb
 """
 
 import contextlib

@@ -3,7 +3,7 @@ compiled to JavaScript), installed on first use with ``npm`` into ``$JAXMOCAP_CA
 ``~/.cache/jaxmocap/npm``) and run by ``node``. An export is clean when its report has no error, warning, info
 or hint (``tests/test_export.py`` asserts it).
 
-    python bench/gltf_validate.py out/motion.glb [more.glb ...]   # one line of counts per file; exit 1 unless clean
+    python bench/checks/gltf_validate.py out/motion.glb [more.glb ...]  # counts per file; exit 1 unless clean
 """
 
 import json
