@@ -6,6 +6,8 @@ Points are in the image's camera frame: x right and y down in pixels, z away fro
 import cv2
 import numpy as np
 
+from smplx_jax.geometry import face_normals
+
 _LIGHT = np.array([-0.35, -0.45, -0.82]) / np.linalg.norm([-0.35, -0.45, -0.82])  # towards the light: up-left-front
 
 
@@ -49,8 +51,7 @@ def draw_mesh(image: np.ndarray, points: np.ndarray, faces: np.ndarray, color=(1
     ``points (V, 3)``: pixel x, pixel y, depth; ``faces (F, 3)`` counter-clockwise seen from outside.
     """
     ids = rasterize(points, faces, (image.shape[1], image.shape[0]))
-    tri = points[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals = face_normals(points, faces)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     shade = 0.3 + 0.7 * np.clip(normals @ _LIGHT, 0.0, 1.0)
     covered = ids >= 0

@@ -22,6 +22,7 @@ import numpy as np
 
 GENERATOR_VERSION = 1
 _GENERATOR_DIR = Path(__file__).parent / "_default"
+_SHARED_SOURCES = (Path(__file__).parent / "geometry.py",)  # modules outside _default that the generator uses
 
 
 def build_default_model() -> dict[str, np.ndarray]:
@@ -57,12 +58,12 @@ def _generator_files(folder: Path) -> list[Path]:
 
 
 def generator_id() -> str:
-    """Version and hash of every file of ``smplx_jax/_default`` (names and contents): editing, adding, removing
-    or renaming any of them gives a new cache folder."""
+    """Version and hash of every file of ``smplx_jax/_default`` and the shared modules it uses (names and
+    contents): editing, adding, removing or renaming any of them gives a new cache folder."""
     h = hashlib.sha256()
-    for path in _generator_files(_GENERATOR_DIR):
-        name = path.relative_to(_GENERATOR_DIR).as_posix().encode()
-        data = path.read_bytes()
+    files = [(p.relative_to(_GENERATOR_DIR).as_posix(), p) for p in _generator_files(_GENERATOR_DIR)]
+    for name, path in files + [(f"../{p.name}", p) for p in _SHARED_SOURCES]:
+        name, data = name.encode(), path.read_bytes()
         h.update(len(name).to_bytes(8, "little") + name + len(data).to_bytes(8, "little") + data)
     return f"v{GENERATOR_VERSION}-{h.hexdigest()[:10]}"
 

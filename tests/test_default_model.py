@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from smplx_jax import constants
-from smplx_jax.default_model import build_default_model, default_model_path, write_default_model
+from smplx_jax.default_model import build_default_model, default_model_path, generator_id, write_default_model
+from smplx_jax.geometry import face_normals, vertex_normals
 
 PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 15, 15, 15, 20, 25, 26, 20, 28,
            29, 20, 31, 32, 20, 34, 35, 20, 37, 38, 21, 40, 41, 21, 43, 44, 21, 46, 47, 21, 49, 50, 21, 52, 53]
@@ -73,6 +74,21 @@ def test_closed_oriented_manifold(m):
     assert np.linalg.norm(cross, axis=1).min() > 1e-9, "degenerate triangle"
     volume = np.einsum("ij,ij->i", tri[:, 0], cross).sum() / 6
     assert 0.05 < volume < 0.10  # outward normals; an adult is about 65 litres
+
+
+def test_vertex_normals():
+    """A regular tetrahedron's vertex normals point from its centre through the vertices; an unused vertex's is 0.
+    On the model, the normals (that the generator and the glTF export share) are unit and point outwards."""
+    v = np.array([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1], [5, 5, 5]])
+    f = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
+    np.testing.assert_allclose(np.linalg.norm(face_normals(v, f), axis=1), 2 * np.sqrt(3) * 4 / 2)  # 2 x area
+    np.testing.assert_allclose(vertex_normals(v, f), np.vstack([v[:4] / np.sqrt(3), np.zeros(3)]), atol=1e-12)
+    model = build_default_model()
+    normals = vertex_normals(model["v_template"], model["f"])
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-6)  # eye corners: ~1e-6 m² around
+    along = np.einsum("fi,fi->f", face_normals(model["v_template"], model["f"]), normals[model["f"]].sum(axis=1))
+    assert np.mean(along > 0) > 0.99 and normals[np.argmax(model["v_template"][:, 1]), 1] > 0.9  # crown: up
+    assert generator_id().startswith("v1-")  # hashes geometry.py too
 
 
 def _inside(points, v, f):

@@ -1,6 +1,8 @@
 """BVH and glTF exports: they parse, have the motion's frames, and reproduce the model's skeleton and mesh."""
 
+import importlib
 import json
+import shutil
 import struct
 
 import jax
@@ -60,7 +62,9 @@ def test_animation_matches_the_posed_skeleton(case):
     assert not np.allclose(positions[4], positions[2])
 
 
-def _parse_bvh(text):
+def _parse_bvh(text, end_sites=None):
+    """Joint names, parents, offsets, frame time and frames; the End Sites' offsets go into ``end_sites``
+    (a dict by joint index), when given."""
     lines = iter(text.splitlines())
     names, parents, offsets, stack = [], [], [], []
     for line in lines:
@@ -69,7 +73,9 @@ def _parse_bvh(text):
             names.append(words[1])
             parents.append(stack[-1] if stack else -1)
         elif words[0] == "End":
-            next(lines), next(lines), next(lines)  # { OFFSET }
+            _, offset, _ = next(lines), next(lines), next(lines)  # { OFFSET }
+            if end_sites is not None:
+                end_sites[stack[-1]] = [float(w) for w in offset.split()[1:]]
         elif words[0] == "OFFSET":
             offsets.append([float(w) for w in words[1:]])
         elif words[0] == "{":
@@ -109,6 +115,49 @@ def test_bvh_parses_and_reproduces_the_skeleton(case, tmp_path):
                 rot[k], pos[k] = rot[p] @ local, pos[p] + rot[p] @ offsets[k]
         order = [anim.names.index(n) for n in names]
         np.testing.assert_allclose(np.array(pos), expected[frame][order], atol=1e-4)
+
+
+def test_bvh_has_no_zero_length_bone(case, tmp_path):
+    """Every bone ends where Blender's importer ends it (its End Site; its one child; the mean of its children)
+    at least 5 mm from its head (Blender calls 1 mm and less "zero length"), and the End Sites reach the tips
+    of toes, fingers, lower lip and eyes of the motion's shape."""
+    model, _, motion = case
+    anim = animation(model, motion, focal_px=FOCAL)
+    ends = {}
+    names, parents, offsets, _, _ = _parse_bvh(write_bvh(tmp_path / "motion.bvh", anim).read_text(), ends)
+    children = [[c for c, p in enumerate(parents) if p == j] for j in range(len(names))]
+    assert sorted(j for j in range(len(names)) if not children[j]) == sorted(ends)  # every leaf has an End Site
+    lengths = {names[j]: np.linalg.norm(ends[j] if j in ends else offsets[children[j]].mean(axis=0))
+               for j in range(len(names))}
+    short = {name: length for name, length in lengths.items() if length < 0.005}
+    assert not short, short
+    assert len(ends) == 15  # feet, jaw, eyes, 10 finger tips
+
+    rest = np.asarray(smplx_jax.forward_joints(model, smplx_jax.SMPLXParams.zeros().replace(
+        betas=np.asarray(anim.betas, np.float32))), np.float64)
+    index = {name: k for k, name in enumerate(smplx_jax.constants.VERTEX_JOINT_NAMES, start=55)}
+    for joint, tip in (("left_index3", rest[index["left_index_tip"]]), ("right_thumb3", rest[index["right_thumb_tip"]]),
+                       ("left_eye", rest[index["left_eye_vertex"]]), ("jaw", rest[55 + 21 + 40]),
+                       ("right_foot", rest[[index["right_big_toe"], index["right_small_toe"]]].mean(axis=0))):
+        j = names.index(joint)
+        np.testing.assert_allclose(anim.rest_joints[anim.names.index(joint)] + ends[j], tip, atol=1e-5)
+
+
+def test_end_sites_of_any_model_file(random_model_dir, monkeypatch):
+    """Leaves end at least `MIN_BONE_LENGTH` away, also in a model file whose tip lies on the joint: then the
+    bone goes on in its parent's direction."""
+    module = importlib.import_module("jaxmocap.export.animation")  # the package's ``animation`` is the function
+    model = load(random_model_dir)
+    betas = np.zeros(model.num_betas)
+    rest = np.asarray(model.joint_template, np.float64)
+    monkeypatch.setitem(module.LEAF_TIPS, "jaw", (22,))  # the jaw's own joint
+    ends = module.end_sites(model, betas, rest)
+    leaves = [j for j in range(55) if j not in model.parents]
+    assert len(leaves) == 15 and not ends[[j for j in range(55) if j in model.parents]].any()
+    assert (np.linalg.norm(ends[leaves], axis=1) >= module.MIN_BONE_LENGTH).all()
+    bone = rest[22] - rest[model.parents[22]]
+    np.testing.assert_allclose(np.cross(ends[22], bone), 0, atol=1e-12)
+    assert ends[22] @ bone > 0
 
 
 def _read_glb(path):
@@ -176,6 +225,20 @@ def test_gltf_is_valid_and_skins_like_the_model(case, tmp_path):
         blended = np.einsum("vk,vkij->vij", weights, mats[joints.astype(int)])
         skinned = np.einsum("vij,vj->vi", blended[:, :3, :3], positions) + blended[:, :3, 3]
         np.testing.assert_allclose(skinned, _expected_world(vertices[frame], motion, frame), atol=2e-5)
+
+
+def test_gltf_passes_the_khronos_validator(case, tmp_path):
+    """The Khronos reference validator (npm ``gltf-validator``, installed into the cache on first use) finds no
+    error, warning, info or hint in either form of the export."""
+    if shutil.which("npm") is None:
+        pytest.skip("npm is not on PATH: the Khronos glTF validator cannot be installed (apt-get install nodejs npm)")
+    from bench.checks import gltf_validate
+
+    model, _, motion = case
+    anim = animation(model, motion, focal_px=FOCAL)
+    paths = [write_gltf(tmp_path / name, model, anim) for name in ("motion.glb", "motion.gltf")]
+    for path, report in zip(paths, gltf_validate.validate(*paths)):
+        assert all(report["issues"][k] == 0 for k in gltf_validate.COUNTS), (path.name, gltf_validate.summary(report))
 
 
 def test_export_command(case, tmp_path, capsys):

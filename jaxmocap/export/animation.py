@@ -19,6 +19,21 @@ from smplx_jax.rotations import rotvec_to_rotmat
 
 CAMERA_TO_WORLD = np.diag([1.0, -1.0, -1.0])
 
+# Where the bone of each joint without children ends (its BVH End Site): the mean of these of the 127 joints
+# (vertex joints and face landmarks) on the rest mesh. Feet reach the toe tips, the jaw the middle of the lower
+# lip (landmark 40: 68-point landmark 57), the eyes their eye vertex in front, the last finger joints the tips.
+_LOWER_LIP = constants.NUM_JOINTS + len(constants.VERTEX_JOINT_NAMES) + 40
+_VERTEX_JOINT = {name: constants.NUM_JOINTS + k for k, name in enumerate(constants.VERTEX_JOINT_NAMES)}
+LEAF_TIPS = {
+    "jaw": (_LOWER_LIP,),
+    **{f"{side}_foot": (_VERTEX_JOINT[f"{side}_big_toe"], _VERTEX_JOINT[f"{side}_small_toe"])
+       for side in ("left", "right")},
+    **{f"{side}_eye": (_VERTEX_JOINT[f"{side}_eye_vertex"],) for side in ("left", "right")},
+    **{f"{side}_{finger}3": (_VERTEX_JOINT[f"{side}_{finger}_tip"],)
+       for side in ("left", "right") for finger in ("thumb", "index", "middle", "ring", "pinky")},
+}
+MIN_BONE_LENGTH = 0.005  # metres; a leaf whose tip is nearer than this continues its parent's bone instead
+
 
 @dataclass(frozen=True)
 class Animation:
@@ -32,6 +47,33 @@ class Animation:
     root_positions: np.ndarray  # (T, 3) world position of joint 0
     betas: np.ndarray  # (B,) the mean shape over valid frames
     fps: float
+    end_sites: np.ndarray  # (55, 3) rest-pose offset from each joint without children to its bone's end; 0 for others
+
+
+def rest_keypoints(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
+    """(72, 3) forward's joints 55..126 (21 vertex joints, 51 face landmarks) of a shape in the rest pose."""
+    sparse = np.asarray(model.sparse_template_cm, np.float64)
+    sparse = sparse + (betas @ np.asarray(model.sparse_shapedirs_cm, np.float64)[: len(betas)]).reshape(3, -1)
+    vertex_joints = sparse[:, np.asarray(model.vertex_joint_slots)].T
+    landmarks = np.einsum("lk,clk->lc", np.asarray(model.landmark_bary, np.float64),
+                          sparse[:, np.asarray(model.landmark_slots)])
+    return np.concatenate([vertex_joints, landmarks])
+
+
+def end_sites(model: smplx_jax.BodyModel, betas: np.ndarray, rest_joints: np.ndarray) -> np.ndarray:
+    """(55, 3) offsets from each joint without children to where its bone ends (`LEAF_TIPS` on the rest mesh),
+    so that no bone of an exported skeleton has zero length; zero for joints with children."""
+    points = np.concatenate([rest_joints, rest_keypoints(model, betas)])
+    parents = model.parents
+    offsets = np.zeros_like(rest_joints)
+    for j, name in enumerate(constants.JOINT_NAMES):
+        if j in parents:
+            continue
+        offsets[j] = points[list(LEAF_TIPS[name])].mean(axis=0) - rest_joints[j] if name in LEAF_TIPS else 0.0
+        if np.linalg.norm(offsets[j]) < MIN_BONE_LENGTH:  # a model file whose tip is missing: go on straight
+            bone = rest_joints[j] - rest_joints[parents[j]]
+            offsets[j] = bone * max(0.5, MIN_BONE_LENGTH / max(float(np.linalg.norm(bone)), 1e-9))
+    return offsets
 
 
 def _held(valid: np.ndarray) -> np.ndarray:
@@ -64,7 +106,8 @@ def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None)
     root_camera = origin + np.asarray(motion["transl"], np.float64)[held] + rest_joints[0]
     return Animation(
         names=constants.JOINT_NAMES, parents=model.parents, rest_joints=rest_joints, local_rotmats=local,
-        root_positions=root_camera @ CAMERA_TO_WORLD.T, betas=betas, fps=float(motion["fps"]))
+        root_positions=root_camera @ CAMERA_TO_WORLD.T, betas=betas, fps=float(motion["fps"]),
+        end_sites=end_sites(model, betas, rest_joints))
 
 
 def global_transforms(anim: Animation) -> tuple[np.ndarray, np.ndarray]:

@@ -1,4 +1,6 @@
-"""BVH export: the 55-joint SMPL-X skeleton and its animation, in metres, y up (Blender's importer reads it)."""
+"""BVH export: the 55-joint SMPL-X skeleton and its animation, in metres, y up (Blender's importer reads it). Each
+leaf joint's End Site reaches the tip its bone points to (toes, finger tips, lower lip, eye front; see
+`jaxmocap.export.animation.LEAF_TIPS`), so no bone has zero length."""
 
 from pathlib import Path
 
@@ -37,7 +39,8 @@ def _hierarchy(anim: Animation) -> tuple[list[str], list[int]]:
         for c in children[j]:
             visit(c, depth + 1)
         if not children[j]:
-            end_site = ["End Site", "{", "  OFFSET 0.000000 0.000000 0.000000", "}"]
+            end = anim.end_sites[j]
+            end_site = ["End Site", "{", f"  OFFSET {end[0]:.6f} {end[1]:.6f} {end[2]:.6f}", "}"]
             lines.extend(f"{pad}  {line}" for line in end_site)
         lines.append(f"{pad}}}")
 

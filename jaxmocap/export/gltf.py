@@ -16,6 +16,7 @@ import numpy as np
 import smplx_jax
 from jaxmocap.export.animation import Animation
 from jaxmocap.io import atomic_write_bytes, atomic_write_text
+from smplx_jax.geometry import vertex_normals
 from smplx_jax.rotations import rotmat_to_quat
 
 FLOAT, USHORT, UINT = 5126, 5123, 5125
@@ -29,20 +30,13 @@ def rest_mesh(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
     return (np.asarray(model.template_cm, np.float64) + offsets.reshape(3, -1)).T
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    tri = vertices[faces]
-    face_normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, faces[:, k], face_normals)
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-
-
 def top_weights(weights: np.ndarray, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    """The ``count`` strongest joints of each vertex and their weights, renormalised to sum to 1."""
+    """The ``count`` strongest joints of each vertex and their float32 weights, renormalised to sum to 1; a slot
+    of zero weight names joint 0, as glTF asks (validators warn of unused slots naming other joints)."""
     joints = np.argsort(-weights, axis=1, kind="stable")[:, :count]
     top = np.take_along_axis(weights, joints, axis=1)
-    return joints, top / top.sum(axis=1, keepdims=True)
+    top = (top / top.sum(axis=1, keepdims=True)).astype(np.float32)
+    return np.where(top > 0, joints, 0), top
 
 
 def _quaternions_xyzw(rotmats: np.ndarray) -> np.ndarray:
@@ -89,7 +83,7 @@ def gltf_document(model: smplx_jax.BodyModel, anim: Animation) -> tuple[dict, by
         "POSITION": buf.add(vertices.astype(np.float32), FLOAT, ARRAY_BUFFER, bounds=True),
         "NORMAL": buf.add(vertex_normals(vertices, faces).astype(np.float32), FLOAT, ARRAY_BUFFER),
         "JOINTS_0": buf.add(joints.astype(np.uint16), USHORT, ARRAY_BUFFER),
-        "WEIGHTS_0": buf.add(weights.astype(np.float32), FLOAT, ARRAY_BUFFER),
+        "WEIGHTS_0": buf.add(weights, FLOAT, ARRAY_BUFFER),
     }
     indices = buf.add(faces.reshape(-1).astype(np.uint32), UINT, ELEMENT_ARRAY_BUFFER, bounds=True)
     inverse_bind = np.tile(np.eye(4), (num_joints, 1, 1))

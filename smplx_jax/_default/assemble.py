@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from smplx_jax.geometry import vertex_normals
+
 from . import head as hd
 from . import rig
 from .hands import hand_pca
@@ -19,14 +21,6 @@ VERTEX_JOINT_IDS = {
 _CORRELATIONS = {("weight", "belly"): 0.5, ("weight", "chest"): 0.4, ("weight", "hips"): 0.35,
                  ("weight", "muscle"): 0.2, ("shoulders", "muscle"): 0.3, ("legs", "arms"): 0.5,
                  ("stature", "head"): 0.2, ("shoulders", "chest"): 0.3}
-
-
-def vertex_normals(v, f):
-    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    out = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(out, f[:, k], n)
-    return out / (np.linalg.norm(out, axis=1, keepdims=True) + 1e-12)
 
 
 def _ids(topo, *parts):
