@@ -11,6 +11,7 @@ import numpy as np
 
 TORSO = (11, 12, 23, 24)  # BlazePose shoulders and hips
 HISTOGRAM_BINS = (12, 6)  # hue, saturation
+APPEARANCE_SIZE = HISTOGRAM_BINS[0] * HISTOGRAM_BINS[1]
 MIN_VISIBILITY = 0.5
 
 
@@ -38,7 +39,7 @@ def appearance(image: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     x0, y0 = np.clip(np.floor(centre - half), 0, (w, h)).astype(int)
     x1, y1 = np.clip(np.ceil(centre + half), 0, (w, h)).astype(int)
     if x1 - x0 < 2 or y1 - y0 < 2:
-        return np.zeros(np.prod(HISTOGRAM_BINS), np.float32)
+        return np.zeros(APPEARANCE_SIZE, np.float32)
     hsv = cv2.cvtColor(image[y0:y1, x0:x1], cv2.COLOR_BGR2HSV)
     hist = cv2.calcHist([hsv], [0, 1], None, list(HISTOGRAM_BINS), [0, 180, 0, 256]).ravel()
     return (hist / max(hist.sum(), 1.0)).astype(np.float32)

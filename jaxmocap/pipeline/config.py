@@ -22,7 +22,9 @@ class RunConfig:
     embedded default path (detector landmarks -> IK -> fit). ``integration``: ``optimize`` (the fit), or with
     ``weights`` ``copy-paste`` or ``eft`` (the body regressor fine-tuned per frame). ``hand_boxes``: hand crops from
     the detector's ``keypoints``, or (with ``weights``) from the ``body`` regressor's projected hands (FrankMocap's
-    fast mode). ``keypoints``: a folder of OpenPose JSON to fit to instead of the detector's 2D keypoints.
+    fast mode). ``keypoints``: a folder of OpenPose JSON of one person to fit to instead of the detector's 2D
+    keypoints (then one person is tracked). ``max_people``: people tracked at most (each gets an identity and a
+    motion; the main one, seen in most frames, is ``motion.npz``).
     ``start``/``end``/``stride``: the frames used. ``chunk_size``: frames per resumable chunk. ``iterations``: fit
     iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``smooth``: temporal
     smoothing; ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``: the outputs besides ``motion.npz``.
@@ -36,6 +38,7 @@ class RunConfig:
     integration: str = "optimize"
     hand_boxes: str = "keypoints"
     keypoints: Path | None = None
+    max_people: int = 4
     start: int = 0
     end: int | None = None
     stride: int = 1
@@ -60,7 +63,7 @@ class RunConfig:
             raise InputError("--hand-boxes body needs --weights (the body regressor gives the hand boxes)")
         if self.focal_length is not None and not self.focal_length > 0:
             raise InputError(f"--focal-length must be positive, got {self.focal_length}")
-        for name in ("chunk_size", "iterations", "stride"):
+        for name in ("chunk_size", "iterations", "stride", "max_people"):
             if getattr(self, name) < (0 if name == "iterations" else 1):
                 raise InputError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
         unknown = sorted(set(self.exports) - set(EXPORT_FILES))

@@ -9,6 +9,7 @@ afresh at every chunk, in both cases). Then over the whole sequence: temporal sm
 outputs.
 """
 
+import dataclasses
 from collections.abc import Iterator
 from dataclasses import dataclass
 from itertools import islice
@@ -18,6 +19,7 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.detect import Detector
+from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.io import file_sha256
 from jaxmocap.media import Media, open_media
 from jaxmocap.motion import write_motion
@@ -26,11 +28,11 @@ from jaxmocap.pipeline.chunks import ChunkStore
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.outputs import write_keypoints, write_outputs
-from jaxmocap.pipeline.records import Bodies, Chunk
+from jaxmocap.pipeline.records import Bodies, Chunk, Track
 from jaxmocap.pipeline.regress import Regression, regressed_bodies
 from jaxmocap.pipeline.stages import Lens, fitted_bodies, initial_bodies, lens_of, motion_arrays, observations, smoothed
 
-SETTINGS_VERSION = 4  # of the stored chunks: bump when what a chunk holds changes
+SETTINGS_VERSION = 5  # of the stored chunks: bump when what a chunk holds changes
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,7 @@ class RunReport:
     valid: int
     seconds: dict[str, float]
     written: list[Path]
+    people: list[int]  # the identities with a motion in ``people/<id>/``
 
 
 @dataclass(frozen=True)
@@ -70,8 +73,9 @@ class Inputs:
 
 
 def run(config: RunConfig, out_dir) -> RunReport:
-    """Run ``config`` and write ``out_dir/motion.npz`` (docs/formats.md), the detections as OpenPose JSON in
-    ``out_dir/keypoints/``, and the outputs ``config`` asks for (`write_outputs`)."""
+    """Run ``config`` and write ``out_dir/motion.npz`` (the main person; docs/formats.md), each person's
+    ``out_dir/people/<id>/motion.npz``, the detections as OpenPose JSON in ``out_dir/keypoints/``, and the outputs
+    ``config`` asks for (`write_outputs`)."""
     out_dir = Path(out_dir)
     (out_dir / "keypoints").mkdir(parents=True, exist_ok=True)
     inputs = Inputs.open(config)
@@ -79,63 +83,88 @@ def run(config: RunConfig, out_dir) -> RunReport:
     chrono = Chrono()
     chunks = list(solved_chunks(config, inputs, store, out_dir, chrono))
     with chrono("smooth"):
-        bodies = Bodies.concatenate([c.bodies for c in chunks])
+        tracks = whole_tracks(chunks, inputs.model)
         if config.smooth:
-            bodies = smoothed(bodies)
+            tracks = {i: dataclasses.replace(t, bodies=smoothed(t.bodies)) for i, t in tracks.items()}
     with chrono("write"):
-        keypoints = np.concatenate([c.keypoints_2d for c in chunks])
-        motion = motion_arrays(inputs.model, bodies, keypoints, inputs.lens) | {
-            "fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
-            "model_sha256": np.asarray(inputs.model_sha256)}
-        path = write_motion(out_dir / "motion.npz", motion)
-    written = [path] + write_outputs(config, out_dir, inputs.model, inputs.media, motion, chunks, chrono)
+        meta = {"fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
+                "model_sha256": np.asarray(inputs.model_sha256)}
+        motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
+                   for i, t in tracks.items()}
+        main = main_person(motions)
+        frames = sum(len(c.frame_index) for c in chunks)
+        motion = motions[main] if motions else motion_arrays(
+            inputs.model, Bodies.absent(frames, inputs.model), np.zeros((frames, 67, 3)), inputs.lens) | meta
+        written = [write_motion(out_dir / "motion.npz", motion)]
+        written += [write_motion(out_dir / "people" / str(i) / "motion.npz", m) for i, m in motions.items()]
+    written += write_outputs(config, out_dir, inputs.model, inputs.media, motions, main, tracks, chunks, chrono)
     store.clear()
-    return RunReport(path, len(keypoints), int(motion["valid"].sum()), dict(chrono.seconds), written)
+    return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions))
+
+
+def main_person(motions: dict[int, dict]) -> int | None:
+    """The person valid in most frames (the first seen of those tied); None without anyone."""
+    return max(motions, key=lambda i: (int(motions[i]["valid"].sum()), -i), default=None)
+
+
+def whole_tracks(chunks: list[Chunk], model: smplx_jax.BodyModel) -> dict[int, Track]:
+    """Each person over all frames, by identity, from the chunks (not valid where absent)."""
+    people = sorted({i for c in chunks for i in c.people})
+    return {i: Track.concatenate([c.people.get(i) or Track.absent(len(c.frame_index), model) for c in chunks])
+            for i in people}
 
 
 def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir: Path, chrono: Chrono
                   ) -> Iterator[Chunk]:
     """Each chunk of frames, from the store if it holds it, else through the per-chunk stages (`solve_chunk`),
-    then stored and its detections written as OpenPose JSON."""
+    then stored and its detections written as OpenPose JSON. Identities carry on from chunk to chunk (in a
+    video); the detector starts afresh in each."""
     from tqdm import tqdm
 
-    detector = Detector(static_image_mode=inputs.media.kind in ("image", "images"),
-                        hands=config.hand_boxes == "keypoints")
+    still = inputs.media.kind in ("image", "images")
+    detector = Detector(static_image_mode=still, hands=config.hand_boxes == "keypoints",
+                        max_people=1 if config.keypoints else config.max_people)
+    tracker = None if still else IdentityTracker()
     done = 0
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
         for index, batch in enumerate(_batches(inputs.frames, config.chunk_size, chrono)):
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
-                chunk = solve_chunk(config, inputs, detector, ids, [frame for _, frame in batch], chrono)
+                chunk = solve_chunk(config, inputs, detector, tracker, ids, [frame for _, frame in batch], chrono)
                 store.save(index, chunk)
                 with chrono("keypoints"):
                     write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
+            elif tracker is not None:
+                tracker.restore(chunk.tracker)
             yield chunk
             done += len(ids)
             bar.update(len(ids))
             bar.set_postfix(fps=f"{done / max(chrono.total, 1e-9):.1f}")
 
 
-def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, ids: np.ndarray, frames: list[np.ndarray],
-                chrono: Chrono) -> Chunk:
-    """One chunk through detection, then IK and the fit (or the regressors)."""
+def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
+                ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono) -> Chunk:
+    """One chunk through detection, then for each person IK and the fit (or the regressors)."""
     with chrono("detect"):
         given = None if inputs.given_keypoints is None else np.stack(
             [inputs.given_keypoints.get(int(i), np.zeros((67, 3))) for i in ids])
         video = inputs.media.kind in ("video", "webcam")
-        obs = observations(detector, frames, inputs.media.fps if video else None, given)
-    if inputs.regression is None:
-        with chrono("ik"):
-            init = initial_bodies(inputs.model, obs)
-        with chrono("fit"):
-            bodies = fitted_bodies(inputs.model, obs, init, inputs.lens, config.iterations)
-        hand_boxes = obs.hand_boxes
-    else:
-        with chrono("regress+integrate"):
-            bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, obs, config.integration,
-                                                  config.iterations)
-    return Chunk(ids, obs.keypoints, obs.body_box, hand_boxes, obs.found, bodies)
+        people = observations(detector, tracker, frames, inputs.media.fps if video else None, given)
+    tracks = {}
+    for person_id, obs in people.items():
+        if inputs.regression is None:
+            with chrono("ik"):
+                init = initial_bodies(inputs.model, obs)
+            with chrono("fit"):
+                bodies = fitted_bodies(inputs.model, obs, init, inputs.lens, config.iterations)
+            hand_boxes = obs.hand_boxes
+        else:
+            with chrono("regress+integrate"):
+                bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, obs,
+                                                      config.integration, config.iterations)
+        tracks[person_id] = Track(obs.keypoints, obs.body_box, hand_boxes, obs.found, bodies)
+    return Chunk(ids, tracks, {} if tracker is None else tracker.state())
 
 
 def _batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[list]:

@@ -1,11 +1,12 @@
-"""Per-frame observations of the tracked person from the detector, as fixed-shape arrays."""
+"""Per-frame observations of each tracked person from the detector, as fixed-shape arrays, and their repairs."""
 
 import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
-from jaxmocap.detect import Detector, to_openpose
+from jaxmocap.detect import Detector, Person, to_openpose
+from jaxmocap.detect.identities import APPEARANCE_SIZE, IdentityTracker, appearance
 from jaxmocap.detect.openpose import LEFT_HAND_SLICE, RIGHT_HAND_SLICE
 
 
@@ -24,25 +25,50 @@ class Observations:
 
 def observe(detector: Detector, frames: list[np.ndarray]) -> Observations:
     """Detect the (first) person in each frame; the detector tracks across the given frames."""
-    n = len(frames)
-    keypoints, body_world = np.zeros((n, 67, 3)), np.zeros((n, 33, 4))
-    hands_world, hands_conf, found = np.zeros((n, 2, 21, 3)), np.zeros((n, 2)), np.zeros(n, bool)
-    body_box, hand_boxes = np.full((n, 4), np.nan), np.full((n, 2, 4), np.nan)
+    arrays = _no_one(len(frames))
     for i, frame in enumerate(frames):
         people = detector(frame)
-        if not people:
-            continue
-        person = people[0]
-        found[i] = True
-        keypoints[i] = to_openpose([person])[0]
-        body_world[i] = np.concatenate([person.body_world, person.body[:, 3:4]], axis=1)
-        body_box[i] = person.box
-        for side, (world, score, box) in enumerate((
-                (person.left_hand_world, person.left_hand_score, person.left_hand_box),
-                (person.right_hand_world, person.right_hand_score, person.right_hand_box))):
-            if world is not None:
-                hands_world[i, side], hands_conf[i, side], hand_boxes[i, side] = world, score, box
-    return Observations(keypoints, body_world, hands_world, hands_conf, body_box, hand_boxes, found)
+        if people:
+            _record(arrays, i, people[0])
+    return Observations(**arrays)
+
+
+def observe_people(detector: Detector, tracker: IdentityTracker | None, frames: list[np.ndarray]
+                   ) -> dict[int, Observations]:
+    """Each person's observations over the frames, by identity (`IdentityTracker`; without one, each frame's
+    people numbered in the detector's order, as for unrelated images); zeros where a person is not seen."""
+    people = {}
+    for i, frame in enumerate(frames):
+        found = detector(frame)
+        if tracker is None:
+            ids = list(range(len(found)))
+        else:
+            landmarks = np.stack([p.body[:, [0, 1, 3]] for p in found]) if found else np.zeros((0, 33, 3))
+            ids = tracker(landmarks, np.stack([appearance(frame, p.body) for p in found]) if found else
+                          np.zeros((0, APPEARANCE_SIZE)))
+        for person_id, person in zip(ids, found):
+            _record(people.setdefault(person_id, _no_one(len(frames))), i, person)
+    return {person_id: Observations(**arrays) for person_id, arrays in sorted(people.items())}
+
+
+def _no_one(n: int) -> dict[str, np.ndarray]:
+    return dict(keypoints=np.zeros((n, 67, 3)), body_world=np.zeros((n, 33, 4)), hands_world=np.zeros((n, 2, 21, 3)),
+                hands_conf=np.zeros((n, 2)), body_box=np.full((n, 4), np.nan), hand_boxes=np.full((n, 2, 4), np.nan),
+                found=np.zeros(n, bool))
+
+
+def _record(arrays: dict[str, np.ndarray], i: int, person: Person) -> None:
+    """Frame ``i`` of a person's arrays from the detector's `Person`, in place."""
+    arrays["found"][i] = True
+    arrays["keypoints"][i] = to_openpose([person])[0]
+    arrays["body_world"][i] = np.concatenate([person.body_world, person.body[:, 3:4]], axis=1)
+    arrays["body_box"][i] = person.box
+    for side, (world, score, box) in enumerate((
+            (person.left_hand_world, person.left_hand_score, person.left_hand_box),
+            (person.right_hand_world, person.right_hand_score, person.right_hand_box))):
+        if world is not None:
+            arrays["hands_world"][i, side], arrays["hands_conf"][i, side] = world, score
+            arrays["hand_boxes"][i, side] = box
 
 
 HAND_GAP_SECONDS = 0.25  # a hand lost for at most this long is interpolated

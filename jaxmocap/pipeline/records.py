@@ -1,5 +1,5 @@
-"""What the stages of a run hand each other: `Bodies` (per-frame bodies and cameras) and `Chunk` (one chunk of
-frames through the per-chunk stages, as stored for resume)."""
+"""What the stages of a run hand each other: `Bodies` (per-frame bodies and cameras), `Track` (one person over a
+chunk of frames) and `Chunk` (every person of one chunk through the per-chunk stages, as stored for resume)."""
 
 import dataclasses
 from dataclasses import dataclass
@@ -26,26 +26,60 @@ class Bodies:
         return jax.tree.map(lambda *a: np.concatenate(a), *parts)
 
 
-@dataclass(frozen=True)
-class Chunk:
-    """One chunk of ``n`` frames after detection and the fit (or the regressors)."""
+    @classmethod
+    def absent(cls, count: int, model) -> "Bodies":
+        """``count`` frames without the person: the rest pose, not valid."""
+        rest = smplx_jax.SMPLXParams.zeros(model.num_betas, model.num_expression)
+        params = jax.tree.map(lambda a: np.zeros((count,) + a.shape, np.float32), rest)
+        return cls(params, np.ones(count, np.float32), np.zeros((count, 2), np.float32), np.zeros(count, bool))
 
-    frame_index: np.ndarray  # (n,) frame numbers in the source
+
+@jax.tree_util.register_dataclass
+@dataclass(frozen=True)
+class Track:
+    """One person over the ``n`` frames of a chunk, after detection and the fit (or the regressors)."""
+
     keypoints_2d: np.ndarray  # (n, 67, 3) the fit's targets: OpenPose BODY_25 + hands, pixels, confidence
     body_box: np.ndarray  # (n, 4) x0, y0, x1, y1 pixels, NaN when missing
     hand_boxes: np.ndarray  # (n, 2, 4) left, right: the hand crops used, NaN when missing
-    found: np.ndarray  # (n,) bool: the detector found a person
+    found: np.ndarray  # (n,) bool: the detector found the person
     bodies: Bodies
 
+    @classmethod
+    def absent(cls, count: int, model) -> "Track":
+        return cls(np.zeros((count, 67, 3), np.float32), np.full((count, 4), np.nan), np.full((count, 2, 4), np.nan),
+                   np.zeros(count, bool), Bodies.absent(count, model))
+
+    @classmethod
+    def concatenate(cls, parts: list["Track"]) -> "Track":
+        return jax.tree.map(lambda *a: np.concatenate(a), *parts)
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One chunk of frames: each person's `Track` by identity, and the identity tracker's state after it."""
+
+    frame_index: np.ndarray  # (n,) frame numbers in the source
+    people: dict[int, Track]
+    tracker: dict[str, np.ndarray]
+
     def arrays(self) -> dict[str, np.ndarray]:
-        """Flat named arrays (the chunk file's keys)."""
-        own = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "bodies"}
-        cameras = {k: getattr(self.bodies, k) for k in ("camera_scale", "camera_trans", "valid")}
-        return own | cameras | {k: np.asarray(v) for k, v in vars(self.bodies.params).items()}
+        """Flat named arrays (the chunk file's keys: ``frame_index``, ``tracker/<key>``, ``<id>/<field>``)."""
+        arrays = {"frame_index": self.frame_index} | {f"tracker/{k}": v for k, v in self.tracker.items()}
+        for person_id, track in self.people.items():
+            leaves = {f.name: getattr(track, f.name) for f in dataclasses.fields(track) if f.name != "bodies"}
+            leaves |= {k: getattr(track.bodies, k) for k in ("camera_scale", "camera_trans", "valid")}
+            leaves |= {k: np.asarray(v) for k, v in vars(track.bodies.params).items()}
+            arrays |= {f"{person_id}/{k}": v for k, v in leaves.items()}
+        return arrays
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> "Chunk":
-        params = smplx_jax.SMPLXParams(**{f.name: arrays[f.name] for f in dataclasses.fields(smplx_jax.SMPLXParams)})
-        bodies = Bodies(params, arrays["camera_scale"], arrays["camera_trans"], arrays["valid"])
-        return cls(arrays["frame_index"], arrays["keypoints_2d"], arrays["body_box"], arrays["hand_boxes"],
-                   arrays["found"], bodies)
+        tracker = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith("tracker/")}
+        people = {}
+        for person_id in sorted({int(k.split("/")[0]) for k in arrays if k.split("/")[0].isdigit()}):
+            a = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith(f"{person_id}/")}
+            params = smplx_jax.SMPLXParams(**{f.name: a[f.name] for f in dataclasses.fields(smplx_jax.SMPLXParams)})
+            bodies = Bodies(params, a["camera_scale"], a["camera_trans"], a["valid"])
+            people[person_id] = Track(a["keypoints_2d"], a["body_box"], a["hand_boxes"], a["found"], bodies)
+        return cls(arrays["frame_index"], people, tracker)

@@ -1,7 +1,8 @@
-"""The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector) -> `initial_bodies` (IK
-from the 3D landmarks) -> `fitted_bodies` (the fit to the 2D keypoints); with FrankMocap's weights the regressors
-(`regress.regressed_bodies`) stand in for the middle two. Over the whole sequence: `smoothed` -> `motion_arrays`
-(what ``motion.npz`` holds); then the outputs (`outputs`)."""
+"""The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector, each person by identity) ->
+for each person `initial_bodies` (IK from the 3D landmarks) -> `fitted_bodies` (the fit to the 2D keypoints); with
+FrankMocap's weights the regressors (`regress.regressed_bodies`) stand in for the middle two. Over the whole
+sequence, for each person: `smoothed` -> `motion_arrays` (what ``motion.npz`` holds); then the outputs
+(`outputs`)."""
 
 import dataclasses
 
@@ -15,24 +16,26 @@ from jaxmocap.integrate import FitConfig, body_from_blazepose, fit, fitted_motio
 from jaxmocap.integrate.camera import default_focal_length
 from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.smooth import smooth_camera, smooth_params
-from jaxmocap.pipeline.observe import Observations, observe, repaired
+from jaxmocap.detect.identities import IdentityTracker
+from jaxmocap.pipeline.observe import Observations, observe_people, repaired
 from jaxmocap.pipeline.records import Bodies
 
 Lens = tuple[float, np.ndarray] | tuple[None, None]  # a pinhole camera's (focal_length, principal_point), or none
 
 
-def observations(detector: Detector, frames: list[np.ndarray], fps: float | None,
-                 given_keypoints: np.ndarray | None = None) -> Observations:
-    """The detector's person in each frame (tracked across them); in a video (``fps`` given) with left and right
-    put back where it exchanged them and hands lost for a moment interpolated; ``given_keypoints`` (N, 67, 3)
-    replace its 2D keypoints as the fit's targets."""
+def observations(detector: Detector, tracker: IdentityTracker | None, frames: list[np.ndarray], fps: float | None,
+                 given_keypoints: np.ndarray | None = None) -> dict[int, Observations]:
+    """Each person in the frames by identity (`observe_people`; the detector starts afresh, ``tracker`` carries
+    the identities on); in a video (``fps`` given) with left and right put back where the detector exchanged them
+    and hands lost for a moment interpolated; ``given_keypoints`` (N, 67, 3) replace the 2D keypoints of the one
+    person tracked as the fit's targets."""
     detector.reset()
-    obs = observe(detector, frames)
+    people = observe_people(detector, tracker, frames)
     if fps is not None:
-        obs = repaired(obs, fps)
+        people = {person_id: repaired(obs, fps) for person_id, obs in people.items()}
     if given_keypoints is not None:
-        obs = dataclasses.replace(obs, keypoints=given_keypoints)
-    return obs
+        people = {person_id: dataclasses.replace(obs, keypoints=given_keypoints) for person_id, obs in people.items()}
+    return people
 
 
 def initial_bodies(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SMPLXParams:
