@@ -18,7 +18,7 @@ from pathlib import Path
 from smplx_jax.default_model import cache_root
 
 from ..errors import InputError
-from ..io import file_sha256
+from ..io import atomic_path, file_sha256
 
 MEDIAPIPE_VERSION = "0.10.21"
 
@@ -94,15 +94,9 @@ def _fetch_into(target: Path) -> None:
                 dest = target / name
                 if dest.exists():
                     continue
-                fd, part = tempfile.mkstemp(prefix=name + ".", suffix=".part", dir=target)
-                try:
-                    with os.fdopen(fd, "wb") as out:
-                        out.write(zf.read(member))
-                    _check(Path(part), name)
-                    os.replace(part, dest)
-                finally:
-                    if os.path.exists(part):
-                        os.unlink(part)
+                with atomic_path(dest) as part:
+                    part.write_bytes(zf.read(member))
+                    _check(part, name)
 
 
 def model_path(name: str, model_dir: str | os.PathLike | None = None) -> Path:
