@@ -16,8 +16,8 @@ import zipfile
 from pathlib import Path
 
 from smplx_jax.default_model import cache_root
+from smplx_jax.model_file import ModelFileError
 
-from ..errors import InputError
 from ..io import atomic_path, file_sha256
 
 MEDIAPIPE_VERSION = "0.10.21"
@@ -45,10 +45,6 @@ MODEL_FILES: dict[str, tuple[str, str]] = {
         "67d996ce96f9d36fe17d2693022c6da93168026ab2f028f9e2365398d8ac7d5d",
     ),
 }
-
-
-class ModelFileError(InputError):
-    """A detector model file is missing, corrupt or cannot be downloaded (the message says what to do)."""
 
 
 def cache_dir() -> Path:
