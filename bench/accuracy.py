@@ -132,7 +132,7 @@ def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
     import smplx_jax
     from jaxmocap.detect import Detector
     from jaxmocap.integrate import fitted_motion
-    from jaxmocap.media import open_media
+    from jaxmocap.frame_source import open_media
     from jaxmocap.motion import lens, read_motion
     from jaxmocap.pipeline import fitted_bodies, initial_bodies, observe, run
     from jaxmocap.pipeline.observe import repaired
@@ -191,7 +191,7 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
     import jax
 
     import smplx_jax
-    from jaxmocap.media import open_media
+    from jaxmocap.frame_source import open_media
     from jaxmocap.motion import lens, motion_params
     from jaxmocap.overlay import body_up, mesh_over_frame, side_view
 

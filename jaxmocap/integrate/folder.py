@@ -11,7 +11,7 @@ import smplx_jax
 from jaxmocap.detect.openpose import read_openpose_json
 from jaxmocap.errors import InputError
 from jaxmocap.integrate import fitting
-from jaxmocap.integrate.motion import fitted_motion
+from jaxmocap.integrate.motion_arrays import fitted_motion
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import motion_params, read_motion, write_motion
 

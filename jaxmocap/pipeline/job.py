@@ -30,7 +30,7 @@ from jaxmocap.integrate.camera import default_focal_length
 from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.folder import read_keypoint_folder
 from jaxmocap.io import file_sha256
-from jaxmocap.media import open_media
+from jaxmocap.frame_source import open_media
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chunks import ChunkStore
 from jaxmocap.pipeline.observe import Observations, observe, repaired

@@ -9,7 +9,7 @@ from tqdm import tqdm
 import smplx_jax
 from jaxmocap.batching import pad_rows
 from jaxmocap.export import animation, write_bvh, write_gltf
-from jaxmocap.media import open_media
+from jaxmocap.frame_source import open_media
 from jaxmocap.motion import lens, motion_params
 from jaxmocap.overlay import OverlayWriter, body_up
 
