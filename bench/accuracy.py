@@ -131,7 +131,7 @@ def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
     the same library calls."""
     import smplx_jax
     from jaxmocap.detect import Detector
-    from jaxmocap.media import open_media
+    from jaxmocap.frame_source import open_media
     from jaxmocap.motion import lens, read_motion
     from jaxmocap.pipeline import (Bodies, RunConfig, fitted_bodies, initial_bodies, motion_arrays, observations,
                                    run)
@@ -190,7 +190,7 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
     import jax
 
     import smplx_jax
-    from jaxmocap.media import open_media
+    from jaxmocap.frame_source import open_media
     from jaxmocap.motion import lens, motion_params
     from jaxmocap.overlay import body_up, mesh_over_frame, side_view
 

@@ -1,29 +1,10 @@
-"""Atomic file writes: a temporary file in the target folder, then ``os.replace``; nothing half-written stays."""
+"""File helpers: atomic writes (`smplx_jax.io`, shared with the body model's cache) and checksums."""
 
 import hashlib
-import os
-import tempfile
-from pathlib import Path
 
+from smplx_jax.io import atomic_path, atomic_write_bytes, atomic_write_text
 
-def atomic_write_bytes(path, data: bytes) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o644)  # mkstemp's 0600 would hide outputs from other users
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
-
-
-def atomic_write_text(path, text: str) -> Path:
-    return atomic_write_bytes(path, text.encode())
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "file_sha256"]
 
 
 def file_sha256(path) -> str:

@@ -44,6 +44,14 @@ def rasterize(points: np.ndarray, faces: np.ndarray, size: tuple[int, int]) -> n
     return ids.reshape(height, width)
 
 
+def face_shading(points: np.ndarray, faces: np.ndarray, light: np.ndarray, ambient: float) -> np.ndarray:
+    """(F,) Lambertian brightness in [ambient, 1] of each face (counter-clockwise seen from outside), lit from the
+    unit direction ``light`` (towards the light, in the frame of ``points``)."""
+    normals = face_normals(points, faces)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    return ambient + (1 - ambient) * np.clip(normals @ light, 0.0, 1.0)
+
+
 def draw_mesh(image: np.ndarray, points: np.ndarray, faces: np.ndarray, color=(150, 175, 215),
               opacity: float = 1.0) -> np.ndarray:
     """A copy of a BGR ``image`` with the mesh drawn over it, flat-shaded by a light at the upper left front.
@@ -51,9 +59,7 @@ def draw_mesh(image: np.ndarray, points: np.ndarray, faces: np.ndarray, color=(1
     ``points (V, 3)``: pixel x, pixel y, depth; ``faces (F, 3)`` counter-clockwise seen from outside.
     """
     ids = rasterize(points, faces, (image.shape[1], image.shape[0]))
-    normals = face_normals(points, faces)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-    shade = 0.3 + 0.7 * np.clip(normals @ _LIGHT, 0.0, 1.0)
+    shade = face_shading(points, faces, _LIGHT, 0.3)
     covered = ids >= 0
     out = image.copy()
     mesh = shade[ids[covered], None] * np.asarray(color, np.float64)

@@ -15,10 +15,11 @@ pose corrections (``posedirs``) are zero.
 
 import hashlib
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from smplx_jax.io import atomic_path
 
 GENERATOR_VERSION = 1
 _GENERATOR_DIR = Path(__file__).parent / "_default"
@@ -34,20 +35,10 @@ def build_default_model() -> dict[str, np.ndarray]:
 
 def write_default_model(path) -> Path:
     """Write the default model to ``path`` (``.npz``), atomically."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     arrays = build_default_model()
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    with atomic_path(path) as tmp:
+        np.savez_compressed(tmp, **arrays)
+    return Path(path)
 
 
 def _generator_files(folder: Path) -> list[Path]:

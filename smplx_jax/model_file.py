@@ -19,7 +19,8 @@ _GET_SMPLX = (
 
 
 class ModelFileError(ValueError):
-    """A body model file is missing, unreadable, or lacks or mis-shapes a key."""
+    """A model file (the body model, or one of jaxmocap's detector models) is missing, unreadable, corrupt or not
+    what it should be; the message says which and what to do."""
 
 
 class ModelNotFoundError(ModelFileError, FileNotFoundError):

@@ -258,7 +258,7 @@ def test_model_download_failure_is_one_clear_error(tmp_path, monkeypatch):
 def test_tracking_finds_the_hands_as_often_as_holistic_does():
     """Over the bundled clip (100 frames, 200 hand-frames) mediapipe's holistic solution finds a hand in 124
     hand-frames; so does the tracking detector (pose ROI, recrop, tracked ROI), each hand at its body's wrist."""
-    from jaxmocap.media import open_media
+    from jaxmocap.frame_source import open_media
 
     clip = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
     _, frames = open_media(clip)

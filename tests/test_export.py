@@ -252,7 +252,7 @@ def test_export_command(case, tmp_path, capsys):
     assert (tmp_path / "motion.bvh").read_text().startswith("HIERARCHY")
     assert json.loads((tmp_path / "motion.gltf").read_text())["buffers"][0]["uri"].startswith("data:")
     assert (tmp_path / "motion.glb").stat().st_mode & 0o777 == 0o644  # readable by others, as open() makes files
-    assert not list(tmp_path.glob(".*.tmp"))
+    assert not list(tmp_path.glob(".*"))  # no temporary file left
     capsys.readouterr()
 
     np.savez(tmp_path / "other.npz", **(motion | {"model_sha256": np.array("0" * 64)}))

@@ -16,6 +16,7 @@ from conftest import load
 from params_util import random_params
 
 import smplx_jax
+from jaxmocap.batching import bucket_size
 from jaxmocap.cli import main
 from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.integrate import copy_paste, fit, fit_frame, ik, smooth_params, smooth_rotvecs, synthetic
@@ -159,7 +160,7 @@ def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit):
     sub = jax.tree.map(lambda a: a[:T - 5], noisy.init)
     r = fit(model, noisy.keypoints[:T - 5], sub)  # 27 frames pad to the same bucket: no new compilation
     assert fitting._fit_batch._cache_size() == before
-    assert fitting.bucket_size(T - 5) == fitting.bucket_size(T) == T
+    assert bucket_size(T - 5, fitting.BUCKETS) == bucket_size(T, fitting.BUCKETS) == T
     # padding does not change the frames' results (each frame's fit is independent of the others)
     np.testing.assert_allclose(r.params.body_pose, noisy_fit.params.body_pose[:T - 5], atol=1e-4)
 

@@ -308,7 +308,7 @@ def test_left_and_right_exchanged_by_the_detector_are_put_back():
     """Real detections of the sample clip, with arms exchanged in frames 10-19 and legs in 12-25 as a detector
     does when it loses track of the sides: the repair gives back the detections; it leaves them alone as they are."""
     from jaxmocap.detect import Detector
-    from jaxmocap.media import open_media
+    from jaxmocap.frame_source import open_media
     from jaxmocap.pipeline.observe import _ARMS, _LEGS, _swap_sides, observe, repair_side_swaps
 
     _, frames = open_media(CLIP, 20, 50, 1)

@@ -28,6 +28,7 @@ from flax import nnx
 from jaxtyping import Array, Bool, Float
 
 import smplx_jax
+from jaxmocap.batching import pad_rows
 from jaxmocap.errors import InputError
 from jaxmocap.regressors import crops
 from jaxmocap.regressors.weights import load_network
@@ -81,8 +82,7 @@ def evaluate_hands(network: nnx.Module, model: smplx_jax.BodyModel, right_hand: 
     for start in range(0, count, batch_size):
         chunk = [samples[i] for i in range(start, min(start + batch_size, count))]
         examples = [hand_example(s, image_size) for s in chunk]
-        images = np.zeros((batch_size, image_size, image_size, 3), np.float32)
-        images[:len(chunk)] = [e.image for e in examples]
+        images = pad_rows(np.stack([e.image for e in examples]).astype(np.float32), batch_size)
         joints, crop = (np.asarray(a)[:len(chunk)] for a in _joints(model, right_hand, _raw(graphdef, state, images)))
         sides = np.array([pixels_per_crop_unit(s) for s in chunk])[:, None, None]
         parts.append(dict(

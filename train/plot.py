@@ -6,6 +6,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from smplx_jax.io import atomic_path
+
 WIDTH, HEIGHT, MARGIN = 560, 360, 60
 COLOURS = [(200, 90, 30), (40, 140, 40), (30, 60, 200), (140, 40, 140)]  # BGR
 
@@ -21,12 +23,10 @@ def curves(log: Path, out: Path, baseline: dict[str, float] | None = None) -> Pa
     dashed = {f"constant {k}": v for k, v in (baseline or {}).items()}
     right = _panel("held-out error", lines, dashed)
     image = np.concatenate([left, right], axis=1)
-    out = Path(out)
-    tmp = out.with_name(out.stem + ".tmp.png")
-    if not cv2.imwrite(str(tmp), image):
-        raise OSError(f"{out}: cannot write the plot")
-    tmp.replace(out)
-    return out
+    with atomic_path(out) as tmp:
+        if not cv2.imwrite(str(tmp), image):
+            raise OSError(f"{out}: cannot write the plot")
+    return Path(out)
 
 
 def _panel(title: str, series: dict[str, list], levels: dict[str, float] | None = None) -> np.ndarray:

@@ -7,8 +7,9 @@
 ``detect_media(input, out_dir)`` writes OpenPose JSON per frame for a video, an image folder or one image.
 """
 
+from ..frame_source import MediaError
 from .detector import Detector, Person
-from .media import MediaError, detect_media, to_openpose
+from .json_output import detect_media, to_openpose
 from .models import ModelFileError, ensure_models
 from .openpose import read_openpose_json, write_openpose_json
 

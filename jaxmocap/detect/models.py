@@ -16,9 +16,9 @@ import zipfile
 from pathlib import Path
 
 from smplx_jax.default_model import cache_root
+from smplx_jax.model_file import ModelFileError
 
-from ..errors import InputError
-from ..io import file_sha256
+from ..io import atomic_path, file_sha256
 
 MEDIAPIPE_VERSION = "0.10.21"
 
@@ -45,10 +45,6 @@ MODEL_FILES: dict[str, tuple[str, str]] = {
         "67d996ce96f9d36fe17d2693022c6da93168026ab2f028f9e2365398d8ac7d5d",
     ),
 }
-
-
-class ModelFileError(InputError):
-    """A detector model file is missing, corrupt or cannot be downloaded (the message says what to do)."""
 
 
 def cache_dir() -> Path:
@@ -94,15 +90,9 @@ def _fetch_into(target: Path) -> None:
                 dest = target / name
                 if dest.exists():
                     continue
-                fd, part = tempfile.mkstemp(prefix=name + ".", suffix=".part", dir=target)
-                try:
-                    with os.fdopen(fd, "wb") as out:
-                        out.write(zf.read(member))
-                    _check(Path(part), name)
-                    os.replace(part, dest)
-                finally:
-                    if os.path.exists(part):
-                        os.unlink(part)
+                with atomic_path(dest) as part:
+                    part.write_bytes(zf.read(member))
+                    _check(part, name)
 
 
 def model_path(name: str, model_dir: str | os.PathLike | None = None) -> Path:

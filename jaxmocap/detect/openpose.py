@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from ..io import atomic_write_text
 
 NUM_KEYPOINTS = 67
 BODY_SLICE, LEFT_HAND_SLICE, RIGHT_HAND_SLICE = slice(0, 25), slice(25, 46), slice(46, 67)
@@ -58,16 +59,7 @@ def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray) -> Path:
         "hand_right_keypoints_2d": flat(p[RIGHT_HAND_SLICE]),
         "face_keypoints_2d": [],
     } for p in keypoints]
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".part", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump({"version": 1.3, "people": people}, f, separators=(",", ":"))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return atomic_write_text(path, json.dumps({"version": 1.3, "people": people}, separators=(",", ":")))
 
 
 def _part(person: dict, key: str, count: int, path) -> np.ndarray:

@@ -9,8 +9,8 @@
 Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `fitting` (2D keypoints
 -> pose, shape, camera), `least_squares` (one body's robust least squares on `optimistix.least_squares`),
 `descent` (its matrix-free Levenberg-Marquardt parts), `keypoints` (model keypoints with an analytic Jacobian),
-`mat3` (3x3 kernels), `eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`, `motion`
-(fits -> motion.npz arrays), `synthetic` (problems with known answers for tests and benchmarks).
+`mat3` (3x3 kernels), `eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`,
+`motion_arrays` (fits -> motion.npz arrays), `synthetic` (problems with known answers for tests and benchmarks).
 """
 
 from jaxmocap.integrate.camera import project, weak_perspective_from_points
@@ -18,7 +18,7 @@ from jaxmocap.integrate.copy_and_paste import copy_paste, wrist_local_rotvecs
 from jaxmocap.integrate.eft import EFTConfig, EFTResult, fine_tune
 from jaxmocap.integrate.fitting import FitConfig, FitResult, default_pose, fit, fit_frame
 from jaxmocap.integrate.inverse_kinematics import body_from_blazepose, hand_into_body, ik
-from jaxmocap.integrate.motion import fitted_motion, reprojection_errors
+from jaxmocap.integrate.motion_arrays import fitted_motion, reprojection_errors
 from jaxmocap.integrate.smooth import KERNEL, smooth_camera, smooth_linear, smooth_params, smooth_rotvecs
 
 __all__ = [

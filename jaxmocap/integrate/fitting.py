@@ -25,6 +25,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int
 
+from jaxmocap.batching import map_in_buckets
 from jaxmocap.integrate import least_squares
 from jaxmocap.integrate.least_squares import prior_weights
 from jaxmocap.integrate.camera import weak_perspective_from_points, weak_perspective_least_squares
@@ -154,10 +155,6 @@ def _fit_batch(km, keypoints, pose, betas, camera, lens, config: FitConfig):
                                                                                        camera, lens)
 
 
-def bucket_size(n: int) -> int:
-    return next((b for b in BUCKETS if b >= n), BUCKETS[-1])
-
-
 def full_pose_of(params: SMPLXParams) -> Float[Array, "T 55 3"]:
     return jax.vmap(SMPLXParams.full_pose)(params)
 
@@ -204,20 +201,16 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
                                  _check("camera_trans", camera_trans, (t, 2), dtype)], axis=1)
     km = openpose_keypoint_model(model)
     lens = _lens(focal_length, principal_point, dtype)
-    outs = []
-    for start in range(0, t, BUCKETS[-1]):
-        stop = min(t, start + BUCKETS[-1])
-        n = stop - start
-        size = bucket_size(n)
-        pad = lambda a: np.concatenate([a[start:stop], np.repeat(a[start:start + 1], size - n, 0)])  # noqa: E731
-        kp = pad(keypoints)
-        kp[n:] = 0.0  # padding frames have no keypoints
-        frames = shard_frames((kp, pad(pose), pad(betas), None if camera is None else pad(camera)), size)
-        out = _fit_batch(km, *frames, lens, config)
-        outs.append(jax.tree.map(lambda a: np.asarray(a)[:n], out))
+
+    def fit_chunk(frames, n):
+        kp, *rest = frames
+        kp = np.concatenate([kp[:n], np.zeros_like(kp[n:])])  # padding frames have no keypoints
+        out = jax.block_until_ready(_fit_batch(km, *shard_frames((kp, *rest), len(kp)), lens, config))
         if progress is not None:
             progress(n)
-    return jax.tree.map(lambda *parts: jnp.asarray(np.concatenate(parts)), *outs)
+        return out
+
+    return map_in_buckets(fit_chunk, (keypoints, pose, betas, camera), BUCKETS)
 
 
 __all__ = ["BUCKETS", "FitConfig", "FitResult", "default_pose", "fit", "fit_frame", "openpose_keypoint_model"]

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
+from jaxmocap.batching import pad_rows, padded_size
 from jaxmocap.integrate.eft import EFTConfig, fine_tune
 from jaxmocap.regressors import BodyOutput, Predictor, crops
 
@@ -22,8 +23,7 @@ def fine_tuned_bodies(predictor: Predictor, model: smplx_jax.BodyModel, images, 
     n, m = len(valid), len(keep)
     if m == 0:
         return BodyOutput(*(jnp.full((n,) + shape, jnp.nan) for shape in ((24, 3, 3), (10,), (3,)))), window, valid
-    size = predictor.bucket(m)  # padded to a bucket (repeating a kept body) so batches reuse compiled functions
-    rows = np.concatenate([keep, np.full(size - m, keep[0], int)])
+    rows = pad_rows(keep, padded_size(m, predictor.buckets))  # a bucket's rows reuse compiled functions
     sub = crops.Window(*(np.asarray(a)[rows] for a in window))
     frame = np.broadcast_to(np.asarray(frame, np.int32), (n,))[rows]
     batch = crops.normalize_body(crops.crop(images, frame, sub))

@@ -21,7 +21,7 @@ import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.io import file_sha256
-from jaxmocap.media import Media, open_media
+from jaxmocap.frame_source import Media, open_media
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore

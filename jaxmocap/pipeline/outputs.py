@@ -8,10 +8,11 @@ import numpy as np
 from tqdm import tqdm
 
 import smplx_jax
+from jaxmocap.batching import pad_rows
 from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.export import animation, write_bvh, write_gltf
 from jaxmocap.export.frankmocap import write_frankmocap_pkls
-from jaxmocap.media import Media, open_media
+from jaxmocap.frame_source import Media, open_media
 from jaxmocap.motion import lens, motion_params
 from jaxmocap.overlay import OverlayWriter, body_up
 from jaxmocap.pipeline.chrono import Chrono
@@ -37,7 +38,7 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motion: dict, source, 
             if not batch:
                 break
             ids = np.arange(done, done + len(batch))
-            padded = np.concatenate([ids, np.full(_BATCH - len(ids), ids[-1])])  # one compiled batch size
+            padded = pad_rows(ids, _BATCH)  # one compiled batch size
             vertices = np.asarray(_VERTICES(model, motion_params(motion, model.num_expression, padded)))
             writer.write(*[(frame, vertices[k], faces, motion["camera_scale"][i], motion["camera_trans"][i])
                            if valid[i] else (frame,) for k, (i, frame) in enumerate(zip(ids, batch))])

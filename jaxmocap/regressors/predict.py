@@ -9,6 +9,7 @@ import numpy as np
 from flax import nnx
 from jaxtyping import Array, Float
 
+from jaxmocap.batching import map_in_buckets, pad_rows, padded_size
 from jaxmocap.regressors import crops as _crops
 from jaxmocap.regressors.body import BodyOutput
 from jaxmocap.regressors.weights import Regressors
@@ -59,24 +60,13 @@ class Predictor:
                            np.zeros((0, 3), np.float32))
         return self._run(self._body, crops, empty)
 
-    def bucket(self, n: int) -> int:
-        """The compiled batch size used for ``n`` crops (n <= the largest bucket)."""
-        return next(b for b in self.buckets if b >= n)
-
     def _run(self, split, crops, empty):
         crops = jnp.asarray(crops, jnp.float32)
         if crops.ndim != 4 or crops.shape[-1] != 3:
             raise ValueError(f"crops: expected (N, H, W, 3), got shape {crops.shape}")
-        n = crops.shape[0]
-        if n == 0:
+        if crops.shape[0] == 0:
             return empty
-        chunks = []
-        for start in range(0, n, self.buckets[-1]):
-            part = crops[start:start + self.buckets[-1]]
-            pad = self.bucket(part.shape[0]) - part.shape[0]
-            out = _apply(split[0], split[1], jnp.pad(part, ((0, pad), (0, 0), (0, 0), (0, 0))), self.microbatch)
-            chunks.append(jax.tree.map(lambda a, k=part.shape[0]: a[:k], out))
-        return jax.tree.map(lambda *a: jnp.concatenate(a), *chunks)
+        return map_in_buckets(lambda batch, _: _apply(*split, batch, self.microbatch), crops, self.buckets)
 
 
 def predict_hands(predictor: Predictor, images, frame, boxes, is_left):
@@ -104,15 +94,14 @@ def _predict(predictor, kind, images, frame, window, present, flip):
     valid = present & window.ok
     keep = np.flatnonzero(valid)
     n, m = len(valid), len(keep)
-    # Crop a bucket-sized batch too (repeating a kept crop), so cropping does not recompile either.
-    top = predictor.buckets[-1]
-    padded = predictor.bucket(m) if m <= top else -(-m // top) * top
-    rows = np.concatenate([keep, np.full(padded - m, keep[0] if m else 0, int)])
-    frame = np.broadcast_to(np.asarray(frame, np.int32), (n,))
-    flip = np.broadcast_to(np.asarray(flip, bool), (n,))
-    sub = _crops.Window(*(np.asarray(a)[rows] for a in window))
-    normalize = _crops.normalize_hand if kind == "hand" else _crops.normalize_body
-    batch = normalize(_crops.crop(images, frame[rows], sub, flip[rows])) if m else np.zeros((0, 224, 224, 3))
+    batch = np.zeros((0, 224, 224, 3))
+    if m:  # crop a bucket-sized batch too (repeating a kept crop), so cropping does not recompile either
+        rows = pad_rows(keep, padded_size(m, predictor.buckets))
+        frame = np.broadcast_to(np.asarray(frame, np.int32), (n,))
+        flip = np.broadcast_to(np.asarray(flip, bool), (n,))
+        sub = _crops.Window(*(np.asarray(a)[rows] for a in window))
+        normalize = _crops.normalize_hand if kind == "hand" else _crops.normalize_body
+        batch = normalize(_crops.crop(images, frame[rows], sub, flip[rows]))
     out = getattr(predictor, kind)(batch)
     full = jax.tree.map(lambda a: jnp.full((n,) + a.shape[1:], jnp.nan, a.dtype).at[keep].set(a[:m]), out)
     return full, window, valid

@@ -12,7 +12,7 @@ import numpy as np
 from flax import nnx
 
 from jaxmocap.errors import InputError
-from jaxmocap.io import atomic_write_text, file_sha256
+from jaxmocap.io import atomic_path, atomic_write_text, file_sha256
 from jaxmocap.regressors.body import BodyConfig, BodyRegressor
 from jaxmocap.regressors.hand import HandConfig, HandRegressor
 
@@ -66,9 +66,8 @@ def save(out_dir: Path, networks: Regressors | dict[str, nnx.Module], sources: d
         _, state = nnx.split(module)
         arrays = {".".join(map(str, p)): np.asarray(v[...], np.float32) for p, v in nnx.to_flat_state(state)}
         path = out_dir / f"{kind}.npz"
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, **arrays)
-        tmp.replace(path)
+        with atomic_path(path) as tmp:
+            np.savez(tmp, **arrays)
         index[kind] = dict(file=path.name, sha256=file_sha256(path), config=dataclasses.asdict(module.config),
                            source=sources.get(kind, ""))
         written.append(path)

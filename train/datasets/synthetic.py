@@ -100,7 +100,7 @@ def _hand_params(model_arrays, seed: int, i: int) -> _HandParams:
     rng = np.random.default_rng((seed, i))
     is_left = bool(rng.random() < 0.5)
     side = 0 if is_left else 1
-    wrist_rotvec = poses.rotmat_to_rotvec(poses.random_hand_orientation(rng))
+    wrist_rotvec = poses.random_hand_orientation(rng)
     hand_pose = poses.random_hand_pose(rng, means[side], components[side])
     betas = np.clip(rng.normal(0.0, 0.8, 10), -2.0, 2.0)
     f = np.float32
@@ -196,7 +196,7 @@ class _BodyParams(NamedTuple):
 
 def _body_params(seed: int, i: int) -> _BodyParams:
     rng = np.random.default_rng((seed, i))
-    orient = poses.rotmat_to_rotvec(poses.random_body_orientation(rng))
+    orient = poses.random_body_orientation(rng)
     body_pose = poses.random_body_pose(rng)
     betas = np.clip(rng.normal(0.0, 1.0, 10), -2.5, 2.5)
     f = np.float32

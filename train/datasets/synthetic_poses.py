@@ -1,9 +1,14 @@
 """Random plausible SMPL-X parameters for the synthetic datasets (numpy, one example per call)."""
 
+import functools
+
+import jax
+import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
 from smplx_jax import constants
+from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
 # Per-axis limits (radians) of the body joints' local axis-angle, SMPL-X frame (x: the body's left, y: up,
 # z: forward). Left-side joints; the right side mirrors them (y and z negated).
@@ -39,28 +44,17 @@ def _body_limits() -> Float[np.ndarray, "21 3 2"]:
 
 
 BODY_POSE_LIMITS = _body_limits()
-_CAMERA_FROM_MODEL = np.diag([1.0, -1.0, -1.0])  # y up, facing +z  ->  y down, facing the camera
+_CAMERA_FROM_MODEL = np.array([np.pi, 0.0, 0.0])  # y up, facing +z  ->  y down, facing the camera
 
 
-def rotmat_to_rotvec(rotmat: Float[np.ndarray, "3 3"]) -> Float[np.ndarray, "3"]:
-    """Axis-angle of a rotation matrix (angle in [0, pi])."""
-    angle = np.arccos(np.clip((np.trace(rotmat) - 1) / 2, -1.0, 1.0))
-    axis = np.array([rotmat[2, 1] - rotmat[1, 2], rotmat[0, 2] - rotmat[2, 0], rotmat[1, 0] - rotmat[0, 1]])
-    if angle < 1e-6:
-        return axis / 2
-    if angle > np.pi - 1e-4:  # axis from the symmetric part
-        sym = (rotmat + np.eye(3)) / 2
-        axis = sym[np.argmax(np.diag(sym))]
-        return angle * axis / np.linalg.norm(axis)
-    return angle * axis / (2 * np.sin(angle))
+@jax.jit
+def _product(rotvecs: Float[jax.Array, "N 3"]) -> Float[jax.Array, "3"]:
+    return rotmat_to_rotvec(functools.reduce(jnp.matmul, rotvec_to_rotmat(rotvecs)))
 
 
-def rotvec_to_rotmat(rotvec: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
-    angle = np.linalg.norm(rotvec)
-    if angle < 1e-12:
-        return np.eye(3)
-    k = np.cross(np.eye(3), rotvec / angle)  # the cross-product matrix [axis]x (row i = e_i x axis)
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+def _composed(*rotvecs: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3"]:
+    """Axis-angle of the product of the rotations ``rotvecs`` (the last applied first)."""
+    return np.asarray(_product(jnp.asarray(np.stack(rotvecs), jnp.float32)))
 
 
 HAND_MEAN_ROTVEC = np.array([np.pi / 2, 0.0, 0.0])
@@ -71,12 +65,11 @@ HAND_MAX_TURN = 1.4
 wrap-around at pi."""
 
 
-def random_hand_orientation(rng: np.random.Generator) -> Float[np.ndarray, "3 3"]:
-    """A camera-frame wrist rotation: the mean orientation turned about a uniformly random axis by an angle uniform
-    in [0, `HAND_MAX_TURN`]."""
+def random_hand_orientation(rng: np.random.Generator) -> Float[np.ndarray, "3"]:
+    """A camera-frame wrist axis-angle: the mean orientation turned about a uniformly random axis by an angle
+    uniform in [0, `HAND_MAX_TURN`]."""
     axis = rng.normal(size=3)
-    turn = rotvec_to_rotmat(rng.uniform(0.0, HAND_MAX_TURN) * axis / np.linalg.norm(axis))
-    return turn @ rotvec_to_rotmat(HAND_MEAN_ROTVEC)
+    return _composed(rng.uniform(0.0, HAND_MAX_TURN) * axis / np.linalg.norm(axis), HAND_MEAN_ROTVEC)
 
 
 def random_hand_pose(
@@ -98,9 +91,8 @@ def random_body_pose(rng: np.random.Generator) -> Float[np.ndarray, "21 3"]:
     return pose * rng.uniform(0.3, 1.0)
 
 
-def random_body_orientation(rng: np.random.Generator) -> Float[np.ndarray, "3 3"]:
-    """Camera-frame global rotation of a mostly upright body at a random yaw."""
-    yaw = rng.uniform(0, 2 * np.pi)
-    turn = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
-    tilt = rotvec_to_rotmat(rng.normal(0.0, 0.12, 3) * [1, 0, 1])
-    return _CAMERA_FROM_MODEL @ tilt @ turn
+def random_body_orientation(rng: np.random.Generator) -> Float[np.ndarray, "3"]:
+    """Camera-frame global axis-angle of a mostly upright body at a random yaw."""
+    yaw = np.array([0.0, rng.uniform(0, 2 * np.pi), 0.0])
+    tilt = rng.normal(0.0, 0.12, 3) * [1, 0, 1]
+    return _composed(_CAMERA_FROM_MODEL, tilt, yaw)

@@ -12,6 +12,8 @@ import cv2
 import numpy as np
 from jaxtyping import Bool, Float, Int, UInt8
 
+from jaxmocap.render import face_shading
+
 # sensor grain: unit Gaussian noise stored as 128 + 16 * noise, cropped at random offsets
 _GRAIN = np.clip(128 + 16 * np.random.default_rng(0).normal(0.0, 1.0, (512, 512, 3)), 0, 255).astype(np.uint8)
 
@@ -90,10 +92,7 @@ def render(
     with ``light`` (unit, camera frame, towards the light) plus ``ambient``; also the mask of covered pixels."""
     points_px = np.concatenate([camera.project(vertices), vertices[:, 2:]], axis=1)
     ids = face_ids(points_px, faces, (image.shape[1], image.shape[0]))
-    tri = vertices[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-    shade = ambient + (1 - ambient) * np.clip(normals @ light, 0.0, 1.0)
+    shade = face_shading(vertices, faces, light, ambient)
     face_rgb = np.clip(shade[:, None] * face_colors, 0, 255).astype(np.uint8)
     covered = ids >= 0
     out = image.copy()

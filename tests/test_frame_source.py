@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from jaxmocap.media import MediaError, open_media
+from jaxmocap.frame_source import MediaError, open_media
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
 

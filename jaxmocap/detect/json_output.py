@@ -8,12 +8,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..media import MediaError, open_media
+from ..frame_source import MediaError, open_media
 from .detector import Detector, Person, as_bgr
 from .draw import draw_openpose
 from .openpose import body25_from_blazepose, hand21, json_name, write_openpose_json
 
-__all__ = ["MediaError", "detect_media", "to_openpose"]
+__all__ = ["detect_media", "to_openpose"]
 
 
 def to_openpose(people: list[Person]) -> np.ndarray:

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
+from jaxmocap.batching import map_in_buckets
 from jaxmocap.integrate import fitting
 from jaxmocap.integrate.camera import project
 from smplx_jax import constants
@@ -17,14 +18,7 @@ _JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
 def reprojection_errors(model, params, scale, trans, keypoints, focal_length=None, principal_point=None) -> np.ndarray:
     """Mean pixel distance per frame over keypoints with confidence > 0 (0 where none); the pinhole camera's
     pixels when ``focal_length`` is given, else the weak-perspective camera's."""
-    joints = []
-    for start in range(0, keypoints.shape[0], fitting.BUCKETS[-1]):
-        stop = min(keypoints.shape[0], start + fitting.BUCKETS[-1])
-        n, size = stop - start, fitting.bucket_size(stop - start)
-        chunk = jax.tree.map(lambda a: jnp.concatenate([a[start:stop], jnp.repeat(a[start:start + 1], size - n, 0)]),
-                             params)
-        joints.append(np.asarray(_JOINTS(model, chunk))[:n])
-    joints = np.concatenate(joints)[:, _OPENPOSE]
+    joints = np.asarray(map_in_buckets(lambda chunk, _: _JOINTS(model, chunk), params, fitting.BUCKETS))[:, _OPENPOSE]
     pix = np.asarray(project(joints, np.asarray(scale), np.asarray(trans), focal_length, principal_point))
     seen = keypoints[..., 2] > 0
     dist = np.where(seen, np.linalg.norm(pix - keypoints[..., :2], axis=-1), 0.0)
