@@ -22,7 +22,7 @@ import smplx_jax
 from smplx_jax import constants
 from smplx_jax.rotations import rotvec_to_rotmat
 from train.datasets import synthetic_poses as poses
-from train.datasets.sample import BodySample, HandSample
+from train.datasets.sample import BodySample, HandSample, box_of_joints
 from train.datasets.synthetic_render import PinholeCamera, background, camera_effects, render
 
 TRAIN_SIZE, TEST_SIZE = 100_000, 1000
@@ -79,12 +79,6 @@ def _place(
     return transl, PinholeCamera(focal, center)
 
 
-def _box(points_2d: Float[np.ndarray, "N 2"], margin: float) -> Float[np.ndarray, "4"]:
-    lo, hi = points_2d.min(axis=0), points_2d.max(axis=0)
-    pad = margin * np.max(hi - lo)
-    return np.concatenate([lo - pad, hi - lo + 2 * pad]).astype(np.float32)
-
-
 def _photograph(rng: np.random.Generator, size: int, camera: PinholeCamera, transl: Float[np.ndarray, "3"],
                 mesh: tuple, subject: Float[np.ndarray, "V 3"], joints: Float[np.ndarray, "J 3"],
                 margin: float) -> dict:
@@ -94,7 +88,7 @@ def _photograph(rng: np.random.Generator, size: int, camera: PinholeCamera, tran
     image, _ = render(background(rng, size), camera, vertices + transl, faces, colors, _light(rng),
                       rng.uniform(0.25, 0.5))
     joints_3d = joints + transl
-    return dict(image=camera_effects(rng, image), box=_box(camera.project(subject + transl), margin),
+    return dict(image=camera_effects(rng, image), box=box_of_joints(camera.project(subject + transl), margin),
                 joints_2d=camera.project(joints_3d).astype(np.float32), joints_3d=joints_3d.astype(np.float32))
 
 
