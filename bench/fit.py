@@ -27,13 +27,28 @@ import numpy as np
 
 
 def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
+    """The PyTorch baseline: seconds, fitted `SMPLXParams`, camera scale and translation."""
+    import torch
+
+    torch.set_num_threads(threads)
+    cost, unknowns, camera = _torch_objective(model_dir, problem, cam0, config)
+    begin = time.perf_counter()
+    _minimize(cost, unknowns, method, iterations)
+    seconds = time.perf_counter() - begin
+    scale, trans = (a.detach().numpy() for a in camera())
+    return seconds, _params_of(unknowns), scale, trans
+
+
+def _torch_objective(model_dir, problem, cam0, config):
+    """The fit's cost in PyTorch (``smplx`` forward); its unknowns (the pose tensors by name, then the camera's
+    ``log_s``, ``d_t``); the camera ``(scale, trans)`` they give, ``scale0 * exp(log_s)`` and ``trans0 + scale0 *
+    d_t`` about the start camera ``cam0`` (so that all unknowns are O(1))."""
     import smplx
     import torch
 
     from jaxmocap.integrate.least_squares import BEND_LIMITS, bend_weights
     from smplx_jax import constants
 
-    torch.set_num_threads(threads)
     init = problem.init
     b = init.betas.shape[0]
     body = smplx.create(str(model_dir), model_type="smplx", use_pca=False, flat_hand_mean=True, batch_size=b)
@@ -41,10 +56,9 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
     start = dict(global_orient=t(init.global_orient), body_pose=t(init.body_pose),
                  left_hand_pose=t(init.left_hand_pose), right_hand_pose=t(init.right_hand_pose), betas=t(init.betas))
     var = {k: v.clone().requires_grad_(True) for k, v in start.items()}
-    log_s = torch.zeros(b, requires_grad=True)
-    d_t = torch.zeros(b, 2, requires_grad=True)
-    s0 = torch.tensor(np.asarray(cam0[:, 0]))
-    t0 = torch.tensor(np.asarray(cam0[:, 1:]))
+    s0, t0 = torch.tensor(np.asarray(cam0[:, 0])), torch.tensor(np.asarray(cam0[:, 1:]))
+    log_s, d_t = torch.zeros(b, requires_grad=True), torch.zeros(b, 2, requires_grad=True)
+    camera = lambda: (s0 * torch.exp(log_s), t0 + s0[:, None] * d_t)  # noqa: E731
     kp = torch.tensor(problem.keypoints)
     conf = kp[..., 2]
     index = list(constants.OPENPOSE67_FROM_SMPLX)
@@ -56,7 +70,8 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
     def cost():
         out = body(**var, jaw_pose=jaw, return_verts=True)
         x = out.joints[:, index, :2]
-        pix = (s0 * torch.exp(log_s))[:, None, None] * x + (t0 + s0[:, None] * d_t)[:, None, :]
+        scale, trans = camera()
+        pix = scale[:, None, None] * x + trans[:, None, :]
         r2 = ((pix - kp[..., :2]) ** 2).sum(-1)
         data = (conf * sigma2[:, None] * torch.log1p(r2 / sigma2[:, None])).sum(1)
         reg = sum((s0 * w) ** 2 * ((var[k] - start[k]) ** 2).sum(1) for k, w in prior.items())
@@ -67,8 +82,13 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
             reg = reg + (s0 * weight) ** 2 * torch.relu(sign * pose[:, j, c] - slack) ** 2
         return (0.5 * (data + reg) / s0**2).sum()
 
-    params = list(var.values()) + [log_s, d_t]
-    begin = time.perf_counter()
+    return cost, list(var.values()) + [log_s, d_t], camera
+
+
+def _minimize(cost, params, method: str, iterations: int) -> None:
+    """``iterations`` of L-BFGS (strong Wolfe) or Adam on ``cost()`` over the tensors ``params``."""
+    import torch
+
     if method == "lbfgs":
         opt = torch.optim.LBFGS(params, lr=1.0, max_iter=iterations, line_search_fn="strong_wolfe")
 
@@ -86,16 +106,17 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
             loss = cost()
             loss.backward()
             opt.step()
-    seconds = time.perf_counter() - begin
+
+
+def _params_of(unknowns):
+    """Batched `SMPLXParams` of the fitted unknowns of `_torch_objective` (jaw, eyes, expression, translation 0)."""
     from smplx_jax import SMPLXParams
 
-    j = lambda k, shape: jnp.asarray(var[k].detach().numpy().reshape(shape))  # noqa: E731
-    params = SMPLXParams(j("global_orient", (b, 3)), j("body_pose", (b, 21, 3)), j("left_hand_pose", (b, 15, 3)),
-                         j("right_hand_pose", (b, 15, 3)), jnp.zeros((b, 3)), jnp.zeros((b, 3)), jnp.zeros((b, 3)),
-                         j("betas", (b, 10)), jnp.zeros((b, 10)), jnp.zeros((b, 3)))
-    scale = (s0 * torch.exp(log_s)).detach().numpy()
-    trans = (t0 + s0[:, None] * d_t).detach().numpy()
-    return seconds, params, scale, trans
+    orient, body, left, right, betas = (jnp.asarray(v.detach().numpy()) for v in unknowns[:5])
+    b = len(betas)
+    zeros = jnp.zeros((b, 3))
+    return SMPLXParams(orient, body.reshape(b, 21, 3), left.reshape(b, 15, 3), right.reshape(b, 15, 3), zeros, zeros,
+                       zeros, betas, jnp.zeros((b, 10)), zeros)
 
 
 def main():
@@ -131,31 +152,49 @@ def main():
         cam0 = np.asarray(start_camera(fitting.full_pose_of(problem.init), problem.init.betas,
                                        jnp.asarray(problem.keypoints)))
         err = lambda p, s, t: float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))  # noqa: E731
-        run = lambda: jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0],  # noqa
-                                                        cam0[:, 1:], iterations=iterations))
-        begin = time.perf_counter()
-        run()
-        first_call = time.perf_counter() - begin
-        times = []
-        for _ in range(3 if args.quick else 5):
-            begin = time.perf_counter()
-            result = run()
-            times.append(time.perf_counter() - begin)
-        seconds = min(times)
-        row = dict(frames=frames, iterations=iterations, jax_seconds=seconds, jax_fps=frames / seconds,
-                   jax_first_call_seconds=first_call, start_error_px=err(problem.init, cam0[:, 0], cam0[:, 1:]),
-                   jax_error_px=err(result.params, result.camera_scale, result.camera_trans))
+        row = _jax_row(model, problem, cam0, iterations, 3 if args.quick else 5, err)
         if not (args.quick and frames > 256):
             for method in ("lbfgs", "adam"):
                 secs, params, s, t = torch_fit(path.parent.parent, problem, cam0, config, method, iterations, threads)
                 row[f"torch_{method}_fps"] = frames / secs
                 row[f"torch_{method}_error_px"] = err(params, s, t)
-                row[f"speedup_vs_{method}"] = secs / seconds
+                row[f"speedup_vs_{method}"] = secs / row["jax_seconds"]
         rows.append(row)
         print(row, flush=True)
 
-    print(f"\nfit ({iterations} iterations), float32, {threads} threads, {platform.processor() or platform.machine()}, "
-          f"jax {jax.__version__}, torch {torch.__version__}; median final reprojection error in px")
+    _print_table(rows, f"\nfit ({iterations} iterations), float32, {threads} threads, "
+                 f"{platform.processor() or platform.machine()}, jax {jax.__version__}, torch {torch.__version__}; "
+                 "median final reprojection error in px")
+    args.out.mkdir(parents=True, exist_ok=True)
+    result = dict(benchmark="fit", threads=threads, machine=platform.machine(), jax=jax.__version__,
+                  torch=torch.__version__, devices=[str(d) for d in jax.devices()], config=vars(config), rows=rows)
+    (args.out / "fit.json").write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.out / 'fit.json'}")
+
+
+def _jax_row(model, problem, cam0, iterations: int, repeats: int, err) -> dict:
+    """Times of `fitting.fit` on ``problem`` from the camera ``cam0``: its first call (compilation included) and
+    the best of ``repeats``, with the start's and the fit's reprojection errors ``err(params, scale, trans)``."""
+    from jaxmocap.integrate import fitting
+
+    run = lambda: jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0],  # noqa
+                                                    cam0[:, 1:], iterations=iterations))
+    begin = time.perf_counter()
+    run()
+    first_call = time.perf_counter() - begin
+    times = []
+    for _ in range(repeats):
+        begin = time.perf_counter()
+        result = run()
+        times.append(time.perf_counter() - begin)
+    seconds, frames = min(times), len(problem.keypoints)
+    return dict(frames=frames, iterations=iterations, jax_seconds=seconds, jax_fps=frames / seconds,
+                jax_first_call_seconds=first_call, start_error_px=err(problem.init, cam0[:, 0], cam0[:, 1:]),
+                jax_error_px=err(result.params, result.camera_scale, result.camera_trans))
+
+
+def _print_table(rows: list[dict], title: str) -> None:
+    print(title)
     print(f"{'frames':>6} {'start px':>9} {'jax fps':>9} {'jax px':>7} {'LBFGS fps':>10} {'LBFGS px':>9} "
           f"{'ratio':>7} {'Adam fps':>9} {'Adam px':>8} {'ratio':>7}")
     for r in rows:
@@ -165,11 +204,6 @@ def main():
                       if "torch_lbfgs_fps" in r else f"{'-':>10} {'-':>9} {'-':>7} {'-':>9} {'-':>8} {'-':>7}")
         print(f"{r['frames']:>6} {r['start_error_px']:>9.2f} {r['jax_fps']:>9.1f} {r['jax_error_px']:>7.2f} "
               f"{torch_cols}")
-    args.out.mkdir(parents=True, exist_ok=True)
-    result = dict(benchmark="fit", threads=threads, machine=platform.machine(), jax=jax.__version__,
-                  torch=torch.__version__, devices=[str(d) for d in jax.devices()], config=vars(config), rows=rows)
-    (args.out / "fit.json").write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out / 'fit.json'}")
 
 
 if __name__ == "__main__":

@@ -86,34 +86,49 @@ def main():
                   "jax_f32_mb8": R.Predictor(jax_nets["jax f32"], buckets, microbatch=8),
                   "jax_bf16_mb8": R.Predictor(jax_nets["jax bf16"], buckets, microbatch=8)}
 
-    rows = []
-    for kind in ("hand", "body"):
-        for batch in args.batches:
-            x = np.random.default_rng(batch).normal(0, 1, (batch, 224, 224, 3)).astype(np.float32)
-            xj = jnp.asarray(x)
-            nchw = torch.from_numpy(x).permute(0, 3, 1, 2).contiguous()
-            net = torch_nets[kind]
+    rows = [_row(kind, batch, torch_nets[kind], predictors, min_seconds, min_reps)
+            for kind in ("hand", "body") for batch in args.batches]
+    _print_table(rows, f"\nregressors (ResNet-50 + head), {threads} threads, "
+                 f"{platform.processor() or platform.machine()}, jax {jax.__version__}, torch {torch.__version__}, "
+                 f"XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    result = dict(benchmark="regressors", threads=threads, machine=platform.machine(), jax=jax.__version__,
+                  torch=torch.__version__, xla_flags=os.environ.get("XLA_FLAGS", ""), gflop_per_image=GFLOP_PER_IMAGE,
+                  matmul_peak_gflops=PEAK_GFLOPS, devices=[str(d) for d in jax.devices()], rows=rows)
+    (args.out / "regressors.json").write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.out / 'regressors.json'}")
 
-            def run_torch(net=net, nchw=nchw):
-                with torch.no_grad():
-                    return net(nchw)
 
-            reference = run_torch()
-            reference = (reference[0] if isinstance(reference, tuple) else reference).numpy()  # body: rotmats
-            fns = {"torch_f32": run_torch}
-            row = dict(network=kind, batch=batch)
-            for name, predictor in predictors.items():
-                fn = getattr(predictor, kind)
-                out = fn(xj)
-                out = out[0] if isinstance(out, tuple) else out
-                row[f"{name}_max_abs_diff"] = float(np.abs(np.asarray(out) - reference).max())
-                fns[name] = lambda f=fn: jax.block_until_ready(f(xj))
-            row.update({name: batch / seconds for name, seconds in _time(fns, min_seconds, min_reps).items()})
-            rows.append(row)
-            print(f"{kind} {batch}: " + ", ".join(f"{k} {row[k]:.2f}" for k in fns), flush=True)
+def _row(kind: str, batch: int, torch_net, predictors: dict, min_seconds: float, min_reps: int) -> dict:
+    """Images/s of the PyTorch network and of each JAX predictor on one random batch, and each JAX output's max
+    |diff| to PyTorch's."""
+    import torch
 
-    print(f"\nregressors (ResNet-50 + head), {threads} threads, {platform.processor() or platform.machine()}, "
-          f"jax {jax.__version__}, torch {torch.__version__}, XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}")
+    x = np.random.default_rng(batch).normal(0, 1, (batch, 224, 224, 3)).astype(np.float32)
+    xj = jnp.asarray(x)
+    nchw = torch.from_numpy(x).permute(0, 3, 1, 2).contiguous()
+
+    def run_torch():
+        with torch.no_grad():
+            return torch_net(nchw)
+
+    reference = run_torch()
+    reference = (reference[0] if isinstance(reference, tuple) else reference).numpy()  # body: rotmats
+    fns = {"torch_f32": run_torch}
+    row = dict(network=kind, batch=batch)
+    for name, predictor in predictors.items():
+        fn = getattr(predictor, kind)
+        out = fn(xj)
+        out = out[0] if isinstance(out, tuple) else out
+        row[f"{name}_max_abs_diff"] = float(np.abs(np.asarray(out) - reference).max())
+        fns[name] = lambda f=fn: jax.block_until_ready(f(xj))
+    row.update({name: batch / seconds for name, seconds in _time(fns, min_seconds, min_reps).items()})
+    print(f"{kind} {batch}: " + ", ".join(f"{k} {row[k]:.2f}" for k in fns), flush=True)
+    return row
+
+
+def _print_table(rows: list[dict], title: str) -> None:
+    print(title)
     names = ["torch_f32", "jax_f32", "jax_f32_mb8", "jax_bf16_mb8"]
     print(f"{'net':>5} {'batch':>5} " + " ".join(f"{n + ' img/s':>18}" for n in names) + "   best jax / torch")
     for r in rows:
@@ -126,12 +141,6 @@ def main():
         print(f"{r['network']:>5} {r['batch']:>5} " + " ".join(
             f"{n}: {r[n] * GFLOP_PER_IMAGE:.0f} ({r[n] * GFLOP_PER_IMAGE / PEAK_GFLOPS[_PEAK[n]]:.0%})" for n in names)
             + "  |d| " + " ".join(f"{r[n + '_max_abs_diff']:.1e}" for n in names[1:]))
-    args.out.mkdir(parents=True, exist_ok=True)
-    result = dict(benchmark="regressors", threads=threads, machine=platform.machine(), jax=jax.__version__,
-                  torch=torch.__version__, xla_flags=os.environ.get("XLA_FLAGS", ""), gflop_per_image=GFLOP_PER_IMAGE,
-                  matmul_peak_gflops=PEAK_GFLOPS, devices=[str(d) for d in jax.devices()], rows=rows)
-    (args.out / "regressors.json").write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out / 'regressors.json'}")
 
 
 if __name__ == "__main__":

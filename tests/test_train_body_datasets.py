@@ -14,7 +14,7 @@ import pytest
 
 from train.datasets import eft, h36m
 from train.datasets import body_joints
-from train.datasets.body_joints import box_from_joints
+from train.datasets.sample import box_of_joints
 
 # OpenPose's BODY_25 output order (doc/02_output.md), in the adapters' snake_case names.
 BODY_25_NAMES = (
@@ -271,7 +271,7 @@ def test_body_25_names_follow_openpose():
     assert body_joints.BODY_25_NAMES == BODY_25_NAMES
 
 
-def test_box_from_joints_ignores_unlabelled():
+def test_box_of_joints_ignores_unlabelled():
     joints = np.array([[10.0, 20.0], [np.nan, np.nan], [30.0, 5.0]])
-    np.testing.assert_allclose(box_from_joints(joints), [10.0, 5.0, 20.0, 15.0])
-    assert np.isnan(box_from_joints(np.full((25, 2), np.nan))).all()
+    np.testing.assert_allclose(box_of_joints(joints), [10.0, 5.0, 20.0, 15.0])
+    assert np.isnan(box_of_joints(np.full((25, 2), np.nan))).all()

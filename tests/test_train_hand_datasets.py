@@ -9,7 +9,8 @@ import pytest
 import scipy.io
 
 from train.datasets import freihand, ho3d, mpii_nzsl, rhd, stb
-from train.datasets.hand_joints import box_from_joints_2d, knuckle_length, rescale_by_knuckle
+from train.datasets.hand_joints import BOX_MARGIN, hand_labels, knuckle_length, rescale_by_knuckle
+from train.datasets.sample import box_of_joints
 
 CAMERA = np.array([[500.0, 0.0, 32.0], [0.0, 480.0, 24.0], [0.0, 0.0, 1.0]])
 
@@ -265,6 +266,6 @@ def test_rescale_by_knuckle_keeps_wrist_and_directions():
 
 def test_box_covers_labelled_joints_with_margin():
     joints = np.array([[10.0, 20.0], [30.0, 25.0], [np.nan, np.nan], [1000.0, np.nan]])
-    np.testing.assert_allclose(box_from_joints_2d(joints), [8.0, 18.0, 24.0, 9.0])
+    np.testing.assert_allclose(box_of_joints(joints, BOX_MARGIN), [8.0, 18.0, 24.0, 9.0])
     with pytest.raises(ValueError, match="no labelled joint"):
-        box_from_joints_2d(np.full((21, 2), np.nan))
+        hand_labels(np.full((1, 21, 2), np.nan))

@@ -160,12 +160,18 @@ def _masked(values):
     return (values if ok else np.zeros_like(values)).astype(np.float32), np.bool_(ok)
 
 
-def _check(sample, joints: int, size: int):
+_HAND_SHAPES = {"joints_2d": (NUM_HAND_JOINTS, 2), "joints_3d": (NUM_HAND_JOINTS, 3), "wrist_rotvec": (3,),
+                "hand_pose": (15, 3)}
+_BODY_SHAPES = {"joints_2d": (NUM_BODY_JOINTS, 2), "joints_3d": (NUM_BODY_JOINTS, 3), "global_orient": (3,),
+                "body_pose": (21, 3)}
+
+
+def _check(sample, size: int, shapes: dict[str, tuple[int, ...]]):
     image = sample.image
     if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
         raise ValueError(f"sample.image: expected (H, W, 3) uint8 BGR, got {getattr(image, 'dtype', None)} "
                          f"{np.shape(image)}")
-    for name, shape in (("box", (4,)), ("joints_2d", (joints, 2)), ("joints_3d", (joints, 3)), ("betas", (10,))):
+    for name, shape in ({"box": (4,), "betas": (10,)} | shapes).items():
         if np.shape(getattr(sample, name)) != shape:
             raise ValueError(f"sample.{name}: expected shape {shape}, got {np.shape(getattr(sample, name))}")
     if not np.all(np.isfinite(sample.box)) or sample.box[2] <= 0 or sample.box[3] <= 0:
@@ -178,10 +184,7 @@ def hand_example(sample: HandSample, size: int, rng: np.random.Generator | None 
                  config: AugmentConfig = AugmentConfig()) -> HandExample:
     """The right-hand crop FrankMocap's hand network sees (left hands mirrored), augmented unless ``rng`` is None;
     BGR ``(x/255 - 0.5)/0.5``."""
-    _check(sample, NUM_HAND_JOINTS, size)
-    if np.shape(sample.wrist_rotvec) != (3,) or np.shape(sample.hand_pose) != (15, 3):
-        raise ValueError(f"sample.wrist_rotvec, sample.hand_pose: expected shapes (3,), (15, 3), got "
-                         f"{np.shape(sample.wrist_rotvec)}, {np.shape(sample.hand_pose)}")
+    _check(sample, size, _HAND_SHAPES)
     height, width = sample.image.shape[:2]
     window = crops.hand_windows(np.asarray(sample.box)[None], (width, height))
     cmap = crop_map(window.origin[0].astype(float), window.size[0].astype(float), size, bool(sample.is_left),
@@ -200,10 +203,7 @@ def body_example(sample: BodySample, size: int, rng: np.random.Generator | None 
                  config: AugmentConfig = AugmentConfig.body()) -> BodyExample:
     """SPIN's person crop, augmented (and mirrored with ``config.flip_prob``) unless ``rng`` is None; RGB with
     ImageNet mean/std."""
-    _check(sample, NUM_BODY_JOINTS, size)
-    if np.shape(sample.global_orient) != (3,) or np.shape(sample.body_pose) != (21, 3):
-        raise ValueError(f"sample.global_orient, sample.body_pose: expected shapes (3,), (21, 3), got "
-                         f"{np.shape(sample.global_orient)}, {np.shape(sample.body_pose)}")
+    _check(sample, size, _BODY_SHAPES)
     height, width = sample.image.shape[:2]
     window = crops.body_windows(np.asarray(sample.box)[None], (width, height))
     if not window.ok[0]:

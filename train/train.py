@@ -215,11 +215,7 @@ def train_and_evaluate(config: TrainConfig, workdir: str | Path, *, model_path: 
     shardings = data_parallel()
     if config.batch_size % jax.device_count():
         raise ValueError(f"batch_size: {config.batch_size} does not split over {jax.device_count()} devices")
-    manager = ocp.CheckpointManager(workdir / "checkpoints", options=ocp.CheckpointManagerOptions(
-        max_to_keep=2, enable_async_checkpointing=False))  # synchronous: the step donates the state buffers
-    if manager.latest_step() is not None:
-        state = manager.restore(manager.latest_step(), args=ocp.args.StandardRestore(state))
-    state = jax.device_put(state, shardings.replicated)
+    manager, state = _restored(workdir / "checkpoints", state, shardings)
     start_step = int(state.step)
     log = workdir / "metrics.jsonl"
     _truncate_log(log, start_step)
@@ -228,36 +224,26 @@ def train_and_evaluate(config: TrainConfig, workdir: str | Path, *, model_path: 
     eval_set = open_dataset(config.eval_dataset or config.dataset, config.data_dir, config.eval_split)
     eval_count = min(config.eval_examples, len(eval_set))
     evals = [global_batch(shardings, b) for b in eval_batches(config, eval_set, eval_count)]
-    eval_fn = functools.partial(jitted_eval_step, setup, constants)
+    evaluate_state = functools.partial(evaluate, setup, functools.partial(jitted_eval_step, setup, constants),
+                                       batches_=evals, count=eval_count)
     baseline = constant_baseline(config, train_set, evals, eval_count, samples=config.eval_examples)
 
     stream = batches(train_set, config.batch_size, config.image_size, seed=config.seed, start_step=start_step,
                      augment=config.augment, workers=config.workers,
                      shard=(jax.process_index(), jax.process_count()))
-    began, step = time.perf_counter(), start_step
+    began = time.perf_counter()
     with log.open("a") as log_file:
-        if step == 0:  # the untrained regressor predicts its start vector: the mean pose
-            row = {f"eval/{k}": v for k, v in evaluate(setup, eval_fn, state, evals, eval_count).items()}
-            log_file.write(json.dumps({"step": 0, "seconds": 0.0} | row) + "\n")
-        while step < config.num_steps:
-            state, terms = jitted_train_step(setup, constants, state, global_batch(shardings, next(stream)))
-            step += 1
-            out_of_time = config.time_limit_s and time.perf_counter() - began > config.time_limit_s
-            done = step == config.num_steps or out_of_time
-            row = {}
-            if step % config.log_every == 0 or done:
-                row |= {f"train/{k}": float(v) for k, v in jax.device_get(terms).items()}
-            if step % config.eval_every == 0 or done:
-                row |= {f"eval/{k}": v for k, v in evaluate(setup, eval_fn, state, evals, eval_count).items()}
-            if row:
-                log_file.write(json.dumps({"step": step, "seconds": time.perf_counter() - began} | row) + "\n")
-                log_file.flush()
-            if step % config.checkpoint_every == 0 or done:
-                manager.save(step, args=ocp.args.StandardSave(state))
-            if out_of_time:
-                break
+
+        def write_row(step: int, seconds: float, row: dict) -> None:
+            log_file.write(json.dumps({"step": step, "seconds": seconds} | row) + "\n")
+            log_file.flush()
+
+        state, step = _train_steps(
+            config, state, start_step, began, evaluate_state=evaluate_state, write_row=write_row,
+            train_step=lambda s: jitted_train_step(setup, constants, s, global_batch(shardings, next(stream))),
+            save=lambda step, s: manager.save(step, args=ocp.args.StandardSave(s)))
     manager.wait_until_finished()
-    final = evaluate(setup, eval_fn, state, evals, eval_count)
+    final = evaluate_state(state)
     network = network_of(setup, constants, jax.device_get(state))
     if jax.process_index() == 0:
         save_weights(workdir / "weights", {config.kind: network}, {config.kind: f"train {config.dataset}"})
@@ -266,6 +252,44 @@ def train_and_evaluate(config: TrainConfig, workdir: str | Path, *, model_path: 
                    examples=eval_count, devices=jax.device_count())
     (workdir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def _restored(folder: Path, state: TrainState, shardings: Shardings):
+    """The checkpoint manager of ``folder`` and ``state``, restored from its latest checkpoint if any, replicated
+    over the devices."""
+    manager = ocp.CheckpointManager(folder, options=ocp.CheckpointManagerOptions(
+        max_to_keep=2, enable_async_checkpointing=False))  # synchronous: the step donates the state buffers
+    if manager.latest_step() is not None:
+        state = manager.restore(manager.latest_step(), args=ocp.args.StandardRestore(state))
+    return manager, jax.device_put(state, shardings.replicated)
+
+
+def _train_steps(config: TrainConfig, state: TrainState, start_step: int, began: float, *, train_step,
+                 evaluate_state, write_row, save) -> tuple[TrainState, int]:
+    """Steps from ``start_step`` to ``config.num_steps`` (fewer once ``config.time_limit_s`` has passed since
+    ``began``): losses every ``log_every`` steps, evaluation every ``eval_every``, a checkpoint every
+    ``checkpoint_every``, all three at the last step. ``train_step(state)`` trains on the next batch;
+    ``write_row(step, seconds, row)`` logs. Returns the state and its step."""
+    step = start_step
+    if step == 0:  # the untrained regressor predicts its start vector: the mean pose
+        write_row(0, 0.0, {f"eval/{k}": v for k, v in evaluate_state(state).items()})
+    while step < config.num_steps:
+        state, terms = train_step(state)
+        step += 1
+        out_of_time = config.time_limit_s and time.perf_counter() - began > config.time_limit_s
+        done = step == config.num_steps or out_of_time
+        row = {}
+        if step % config.log_every == 0 or done:
+            row |= {f"train/{k}": float(v) for k, v in jax.device_get(terms).items()}
+        if step % config.eval_every == 0 or done:
+            row |= {f"eval/{k}": v for k, v in evaluate_state(state).items()}
+        if row:
+            write_row(step, time.perf_counter() - began, row)
+        if step % config.checkpoint_every == 0 or done:
+            save(step, state)
+        if out_of_time:
+            break
+    return state, step
 
 
 def _truncate_log(log: Path, step: int) -> None:

@@ -43,6 +43,15 @@ class BodyCage:
             self._leg(s)
         self._head()
 
+    def _extrude(self, faces, part, place, slot):
+        """Extrude ``faces`` of the cage into ``part``, new vertices placed by ``place``; each new vertex inherits
+        the ``slot`` of the vertex it was extruded from. Returns old -> new vertex ids."""
+        mapping = self.c.extrude(faces, part, place)
+        for old, new in list(mapping.items()):
+            if old in slot:
+                slot[new] = slot[old]
+        return mapping
+
     # ------------------------------------------------------------------ torso
     def _levels(self):
         sk = self.sk
@@ -100,12 +109,13 @@ class BodyCage:
 
     # ------------------------------------------------------------------ arms and hands
     def _arm(self, s):
-        c, J, sk = self.c, self.J, self.sk
+        """The arm from its torso opening to the wrist, then the hand."""
+        J, sk = self.J, self.sk
         sh, el, wr = (16, 18, 20) if s > 0 else (17, 19, 21)
         S, E, W = J[sh], J[el], J[wr]
         g, m = sk.girth, sk.muscle
         ti = 4 if s > 0 else 0
-        slot = {}
+        slot = {}  # vertex -> (row "top"/"bot", column 0-4) around the arm
         for k in range(5):
             slot[self.torso_ids[ti, 4, k]] = ("top", k)
             slot[self.torso_ids[ti, 3, k]] = ("bot", k)
@@ -119,18 +129,18 @@ class BodyCage:
                 return center + ry * np.cos(phi) * Y + rz * np.sin(phi) * Z
             return place
 
-        def extrude(place, name=part):
-            mapping = c.extrude(patch, name, place)
-            for old, new in list(mapping.items()):
-                if old in slot:
-                    slot[new] = slot[old]
-            return mapping
+        self._extrude(patch, part, oval_ring(S + (s * 0.032, 0.010, 0.006), 0.050 * g * m, 0.053 * g * m), slot)
+        self._extrude(patch, part, oval_ring(E + (0, 0.002, -0.002), 0.034 * g, 0.037 * g), slot)
+        self._extrude(patch, part, oval_ring(E + 0.28 * (W - E), 0.035 * g * m, 0.041 * g * m), slot)
+        wrist_ring = self._extrude(patch, part, oval_ring(W + (-s * 0.006, 0.0, 0.003), 0.0185 * g, 0.0285 * g),
+                                   slot)
+        self._hand(s, patch, slot, wrist_ring)
 
-        extrude(oval_ring(S + (s * 0.032, 0.010, 0.006), 0.050 * g * m, 0.053 * g * m))
-        extrude(oval_ring(E + (0, 0.002, -0.002), 0.034 * g, 0.037 * g))
-        extrude(oval_ring(E + 0.28 * (W - E), 0.035 * g * m, 0.041 * g * m))
-        wrist_ring = extrude(oval_ring(W + (-s * 0.006, 0.0, 0.003), 0.0185 * g, 0.0285 * g))
-        al = sk.arm_len
+    def _hand(self, s, patch, slot, wrist_ring):
+        """Palm rings from the wrist's ``patch``, a finger from each of its four cap faces, the thumb from the
+        palm's front wall."""
+        c, sk = self.c, self.sk
+        W, g, al = self.J[20 if s > 0 else 21], sk.girth, sk.arm_len
         hand = "l_hand" if s > 0 else "r_hand"
 
         def hand_ring(dxs, zs, thick):
@@ -142,9 +152,10 @@ class BodyCage:
                 return W + (s * dxs[k] * al, yy - 0.003, zs[k] * al)
             return place
 
-        mid = extrude(hand_ring([0.047] * 5, 0.0025 + 0.0415 * g * np.linspace(-1, 1, 5), 0.027 * g), hand)
-        extrude(hand_ring([0.088, 0.094, 0.098, 0.097, 0.093], [-0.0405, -0.0205, -0.0025, 0.0165, 0.0365],
-                          0.021 * g), hand)
+        mid = self._extrude(patch, hand, hand_ring([0.047] * 5, 0.0025 + 0.0415 * g * np.linspace(-1, 1, 5), 0.027 * g),
+                            slot)
+        self._extrude(patch, hand, hand_ring([0.088, 0.094, 0.098, 0.097, 0.093],
+                                             [-0.0405, -0.0205, -0.0025, 0.0165, 0.0365], 0.021 * g), slot)
         # fingers from the four cap faces
         for f in patch:
             ks = sorted({slot[v][1] for v in c.faces[f]})
@@ -180,8 +191,7 @@ class BodyCage:
 
         for center, a, b in ((j2 + 0.0012 * up, 0.95 * hw, 0.93 * ht), (j3 + 0.0010 * up, 0.84 * hw, 0.80 * ht),
                              (tip - 0.0042 * d + 0.0008 * up, 0.58 * hw, 0.52 * ht)):
-            m = c.extrude([f], part, ring(center, a, b))
-            fslot.update({m[v]: fslot[v] for v in list(fslot) if v in m})
+            self._extrude([f], part, ring(center, a, b), fslot)
 
     def _thumb(self, s, f, tslot):
         c, sk = self.c, self.sk
@@ -203,16 +213,16 @@ class BodyCage:
         for center, a, b in ((0.5 * (root + t1 + 0.026 * d) + 0.006 * Z, 0.0150, 0.0118),
                              (t2 + 0.0008 * up, 0.0105, 0.0095), (t3 + 0.0008 * up, 0.0094, 0.0084),
                              (tip - 0.0045 * d + 0.0008 * up, 0.0060, 0.0052)):
-            m = c.extrude([f], part, ring(center, a, b))
-            tslot.update({m[v]: tslot[v] for v in list(tslot) if v in m})
+            self._extrude([f], part, ring(center, a, b), tslot)
 
     # ------------------------------------------------------------------ legs and feet
     def _leg(self, s):
+        """The leg from its torso opening to the heel, then the foot."""
         c, J, sk = self.c, self.J, self.sk
         hip, knee, ankle = (1, 4, 7) if s > 0 else (2, 5, 8)
         H, K, A = J[hip], J[knee], J[ankle]
         g, m = sk.girth, sk.muscle
-        slot = {}
+        slot = {}  # rim vertex -> its angle around the leg (the cap centre has none)
         ic = 3 if s > 0 else 1
         for f in self.leg_patch[s]:
             for v in c.faces[f]:
@@ -235,24 +245,24 @@ class BodyCage:
                 return p
             return place
 
-        def extrude(place, name=part):
-            mapping = c.extrude(patch, name, place)
-            for old, new in list(mapping.items()):
-                if old in slot:
-                    slot[new] = slot[old]
-            return mapping
-
         gm = g * m
         ly = sk.ly
-        extrude(ring(np.array([H[0] + s * 0.018, ly(-0.600), 0.002]), 0.072 * gm, 0.070 * gm, 0.072 * gm, 0.076 * gm))
-        extrude(ring(H + 0.72 * (K - H) + (s * 0.008, 0, 0.010), 0.062 * gm, 0.060 * gm, 0.062 * gm, 0.058 * gm))
-        extrude(ring(K + (0, 0, 0.004), 0.047 * g, 0.050 * g, 0.052 * g, 0.043 * g))
-        extrude(ring(np.array([K[0] - s * 0.004, ly(-0.955), -0.016]), 0.045 * gm, 0.049 * gm, 0.037 * g,
-                     0.056 * gm))
-        r5 = extrude(ring(np.array([A[0], ly(-1.163), A[2] + 0.004]), 0.029, 0.031, 0.030, 0.034))
-        r6 = extrude(ring(np.array([A[0] + s * 0.002, ly(-1.268), A[2] + 0.010]), 0.035, 0.035, 0.050, 0.057,
-                          ydrop=-0.034))
-        # foot from the two front wall faces between the ankle and heel rings
+        for center, lat, med, front, back in (
+            (np.array([H[0] + s * 0.018, ly(-0.600), 0.002]), 0.072 * gm, 0.070 * gm, 0.072 * gm, 0.076 * gm),
+            (H + 0.72 * (K - H) + (s * 0.008, 0, 0.010), 0.062 * gm, 0.060 * gm, 0.062 * gm, 0.058 * gm),
+            (K + (0, 0, 0.004), 0.047 * g, 0.050 * g, 0.052 * g, 0.043 * g),
+            (np.array([K[0] - s * 0.004, ly(-0.955), -0.016]), 0.045 * gm, 0.049 * gm, 0.037 * g, 0.056 * gm),
+        ):
+            self._extrude(patch, part, ring(center, lat, med, front, back), slot)
+        r5 = self._extrude(patch, part, ring(np.array([A[0], ly(-1.163), A[2] + 0.004]), 0.029, 0.031, 0.030, 0.034),
+                           slot)
+        r6 = self._extrude(patch, part, ring(np.array([A[0] + s * 0.002, ly(-1.268), A[2] + 0.010]), 0.035, 0.035,
+                                             0.050, 0.057, ydrop=-0.034), slot)
+        self._foot(s, slot, r5, r6)
+
+    def _foot(self, s, slot, r5, r6):
+        """The foot from the two front wall faces between the ankle ring ``r5`` and the heel ring ``r6``."""
+        c, A = self.c, self.J[7 if s > 0 else 8]
         s5 = {round(np.degrees(slot[v])): v for v in r5.values() if v in slot}
         s6 = {round(np.degrees(slot[v])): v for v in r6.values() if v in slot}
         fslot = {}
@@ -264,7 +274,7 @@ class BodyCage:
         foot = "l_foot" if s > 0 else "r_foot"
         toe_out = np.radians(7.0) * s
         R = np.array([[np.cos(toe_out), 0, np.sin(toe_out)], [0, 1, 0], [-np.sin(toe_out), 0, np.cos(toe_out)]])
-        y0 = ly(-1.300)
+        y0 = self.sk.ly(-1.300)
 
         def foot_ring(dz, tops, bots, xs):
             def place(v):
@@ -278,8 +288,7 @@ class BodyCage:
             ((0.120, 0.120, 0.120), (0.052, 0.072, 0.068), (0.002, 0.005, 0.014), (0.050, 0.007, -0.038)),
             ((0.196, 0.210, 0.216), (0.016, 0.026, 0.030), (0.0, 0.0, 0.0), (0.040, 0.006, -0.034)),
         ):
-            mp = c.extrude(faces, foot, foot_ring(dz, tops, bots, xs))
-            fslot.update({mp[v]: fslot[v] for v in list(fslot) if v in mp})
+            self._extrude(faces, foot, foot_ring(dz, tops, bots, xs), fslot)
 
     # ------------------------------------------------------------------ neck and head
     def _head(self):

@@ -11,11 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
-from train.datasets.sample import NUM_BODY_JOINTS, BodySample
+from train.datasets.sample import NUM_BODY_JOINTS, BodySample, read_colour_image
 
 BODY_25_NAMES = (
     "nose", "neck", "right_shoulder", "right_elbow", "right_wrist", "left_shoulder", "left_elbow", "left_wrist",
@@ -102,15 +101,6 @@ def box_from_center_scale(
     return np.concatenate([top_left, side[..., None], side[..., None]], axis=-1)
 
 
-def box_from_joints(joints_2d: Float[np.ndarray, "J 2"]) -> Float[np.ndarray, "4"]:
-    """The tight x, y, w, h box around the labelled (non-NaN) 2D joints; NaN if none is labelled."""
-    labelled = joints_2d[~np.isnan(joints_2d).any(axis=-1)]
-    if len(labelled) == 0:
-        return np.full(4, np.nan, np.float32)
-    low, high = labelled.min(axis=0), labelled.max(axis=0)
-    return np.concatenate([low, high - low]).astype(np.float32)
-
-
 class BodyLabels(NamedTuple):
     """The labels of N samples, stacked (the fields of `BodySample` but the image)."""
 
@@ -124,7 +114,7 @@ class BodyLabels(NamedTuple):
 
 @dataclass(frozen=True)
 class BodySamples(Sequence[BodySample]):
-    """Labels parsed once; each image read with cv2.imread when its sample is taken."""
+    """Labels parsed once; each image read when its sample is taken."""
 
     image_paths: tuple[Path, ...]
     labels: BodyLabels
@@ -138,8 +128,5 @@ class BodySamples(Sequence[BodySample]):
         return len(self.image_paths)
 
     def __getitem__(self, index: int) -> BodySample:
-        path = self.image_paths[index]
-        image = cv2.imread(str(path))
-        if image is None:
-            raise FileNotFoundError(f"{path}: image missing or unreadable")
+        image = read_colour_image(self.image_paths[index])
         return BodySample(image=image, **{name: array[index] for name, array in self.labels._asdict().items()})

@@ -1,5 +1,5 @@
 """Shared by the hand dataset adapters: joint re-orderings into OpenPose's hand order, pinhole projection, the hand
-box from 2D joints, FrankMocap's knuckle-length rescaling of 3D joints, and the lazy sequence of samples they return.
+box's margin, FrankMocap's knuckle-length rescaling of 3D joints, and the lazy sequence of samples they return.
 
 OpenPose hand order: wrist, thumb 1-4, index 1-4, middle 1-4, ring 1-4, pinky 1-4 (1 = the base joint, 4 = the tip).
 """
@@ -9,11 +9,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
-from train.datasets.sample import NUM_HAND_JOINTS, HandSample
+from train.datasets.sample import NUM_HAND_JOINTS, HandSample, box_of_joints, read_colour_image
 
 # OPENPOSE_FROM_X[i] = index, in dataset X's order, of OpenPose hand joint i.
 OPENPOSE_FROM_MANO = np.array([0, 13, 14, 15, 16, 1, 2, 3, 17, 4, 5, 6, 18, 10, 11, 12, 19, 7, 8, 9, 20])
@@ -35,16 +34,6 @@ def project(joints_3d: Float[np.ndarray, "J 3"], camera_matrix: Float[np.ndarray
     """Pixels of camera-frame points (x right, y down, z forward) under a pinhole camera matrix."""
     homogeneous = joints_3d @ np.asarray(camera_matrix, np.float64).T
     return homogeneous[:, :2] / homogeneous[:, 2:]
-
-
-def box_from_joints_2d(joints_2d: Float[np.ndarray, "J 2"]) -> Float[np.ndarray, "4"]:
-    """`x, y, w, h` of the tight box of the finite (labelled) joints, grown by `BOX_MARGIN` on each side."""
-    labelled = joints_2d[np.isfinite(joints_2d).all(axis=1)]
-    if len(labelled) == 0:
-        raise ValueError("box_from_joints_2d: no labelled joint (all NaN)")
-    low, high = labelled.min(axis=0), labelled.max(axis=0)
-    margin = BOX_MARGIN * (high - low).max()
-    return np.concatenate([low - margin, high - low + 2 * margin]).astype(np.float32)
 
 
 def knuckle_length(joints_3d: Float[np.ndarray, "21 3"]) -> Float[np.ndarray, ""]:
@@ -96,7 +85,9 @@ def hand_labels(
 
     joints_2d = filled(joints_2d, (NUM_HAND_JOINTS, 2))
     if boxes is None:
-        boxes = np.stack([box_from_joints_2d(j) for j in joints_2d]) if n else np.zeros((0, 4), np.float32)
+        boxes = np.stack([box_of_joints(j, BOX_MARGIN) for j in joints_2d]) if n else np.zeros((0, 4), np.float32)
+        if np.isnan(boxes).any():
+            raise ValueError("hand_labels: a hand has no box and no labelled joint to make one from (all NaN)")
     return HandLabels(
         boxes=filled(boxes, (4,)),
         joints_2d=joints_2d,
@@ -110,7 +101,7 @@ def hand_labels(
 
 @dataclass(frozen=True)
 class HandSamples(Sequence[HandSample]):
-    """`HandSample`s whose images are read with cv2.imread when indexed; image i has labels `label_index[i]`."""
+    """`HandSample`s whose images are read when indexed; image i has labels `label_index[i]`."""
 
     image_paths: tuple[Path, ...]
     labels: HandLabels
@@ -122,13 +113,10 @@ class HandSamples(Sequence[HandSample]):
     def __getitem__(self, i: int) -> HandSample:
         if not -len(self) <= i < len(self):
             raise IndexError(f"sample {i} out of range for {len(self)} samples")
-        path, j = self.image_paths[i], self.label_index[i]
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise FileNotFoundError(f"{path}: missing or unreadable image (expected a colour image)")
+        j = self.label_index[i]
         labels = self.labels
         return HandSample(
-            image=image,
+            image=read_colour_image(self.image_paths[i]),
             box=labels.boxes[j],
             joints_2d=labels.joints_2d[j],
             joints_3d=labels.joints_3d[j],

@@ -6,8 +6,10 @@ orientation maps the model's y-up frame into it (as in motion.npz). Unknown labe
 masked (zeros + mask False) in an example. Hand joints are in OpenPose hand order (21); body joints BODY_25.
 """
 
+from pathlib import Path
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 from jaxtyping import Bool, Float, UInt8
 
@@ -65,3 +67,22 @@ class BodyExample(NamedTuple):
     pose_mask: Bool[np.ndarray, ""]
     betas: Float[np.ndarray, "10"]
     betas_mask: Bool[np.ndarray, ""]
+
+
+def read_colour_image(path: Path) -> UInt8[np.ndarray, "H W 3"]:
+    """A sample's image, BGR as cv2.imread gives it; FileNotFoundError naming the file if it cannot be read."""
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise FileNotFoundError(f"{path}: missing or unreadable image (expected a colour image)")
+    return image
+
+
+def box_of_joints(joints_2d: Float[np.ndarray, "J 2"], margin: float = 0.0) -> Float[np.ndarray, "4"]:
+    """``x, y, w, h`` of the tight box of the labelled (finite) 2D joints, each side grown by ``margin`` times its
+    longer side; NaN if none is labelled."""
+    labelled = joints_2d[np.isfinite(joints_2d).all(axis=-1)]
+    if len(labelled) == 0:
+        return np.full(4, np.nan, np.float32)
+    low, high = labelled.min(axis=0), labelled.max(axis=0)
+    grow = margin * (high - low).max()
+    return np.concatenate([low - grow, high - low + 2 * grow]).astype(np.float32)

@@ -22,7 +22,7 @@ import smplx_jax
 from smplx_jax import constants
 from smplx_jax.rotations import rotvec_to_rotmat
 from train.datasets import synthetic_poses as poses
-from train.datasets.sample import BodySample, HandSample
+from train.datasets.sample import BodySample, HandSample, box_of_joints
 from train.datasets.synthetic_render import PinholeCamera, background, camera_effects, render
 
 TRAIN_SIZE, TEST_SIZE = 100_000, 1000
@@ -79,10 +79,17 @@ def _place(
     return transl, PinholeCamera(focal, center)
 
 
-def _box(points_2d: Float[np.ndarray, "N 2"], margin: float) -> Float[np.ndarray, "4"]:
-    lo, hi = points_2d.min(axis=0), points_2d.max(axis=0)
-    pad = margin * np.max(hi - lo)
-    return np.concatenate([lo - pad, hi - lo + 2 * pad]).astype(np.float32)
+def _photograph(rng: np.random.Generator, size: int, camera: PinholeCamera, transl: Float[np.ndarray, "3"],
+                mesh: tuple, subject: Float[np.ndarray, "V 3"], joints: Float[np.ndarray, "J 3"],
+                margin: float) -> dict:
+    """The fields every sample has: the image of ``mesh`` (vertices, faces, per-face colours) moved by ``transl``
+    over a random background in a random light, the box of the ``subject`` vertices and the ``joints``' labels."""
+    vertices, faces, colors = mesh
+    image, _ = render(background(rng, size), camera, vertices + transl, faces, colors, _light(rng),
+                      rng.uniform(0.25, 0.5))
+    joints_3d = joints + transl
+    return dict(image=camera_effects(rng, image), box=box_of_joints(camera.project(subject + transl), margin),
+                joints_2d=camera.project(joints_3d).astype(np.float32), joints_3d=joints_3d.astype(np.float32))
 
 
 # ------------------------------------------------------------------------------------------------ hands
@@ -169,20 +176,10 @@ class SyntheticHands(Sequence[HandSample]):
         arm_color = skin if rng.random() < 0.5 else rng.uniform(20, 235, 3)
         colors = np.concatenate([np.repeat(skin[None], len(hand_faces), 0), np.repeat(arm_color[None], 48, 0)])
         colors *= rng.uniform(0.96, 1.04, (len(colors), 1))
-        image, _ = render(background(rng, size), camera, np.concatenate([vertices, arm_vertices]) + transl,
-                          np.concatenate([hand_faces, arm_faces + len(vertices)]), colors, _light(rng),
-                          rng.uniform(0.25, 0.5))
-        joints_3d = joints + transl
-        return HandSample(
-            image=camera_effects(rng, image),
-            box=_box(camera.project(vertices + transl), 0.05),
-            joints_2d=camera.project(joints_3d).astype(np.float32),
-            joints_3d=joints_3d.astype(np.float32),
-            wrist_rotvec=p.wrist_rotvec,
-            hand_pose=p.hand_pose,
-            betas=p.betas,
-            is_left=p.is_left,
-        )
+        mesh = (np.concatenate([vertices, arm_vertices]), np.concatenate([hand_faces, arm_faces + len(vertices)]),
+                colors)
+        return HandSample(**_photograph(rng, size, camera, transl, mesh, vertices, joints, 0.05),
+                          wrist_rotvec=p.wrist_rotvec, hand_pose=p.hand_pose, betas=p.betas, is_left=p.is_left)
 
 
 # ------------------------------------------------------------------------------------------------ bodies
@@ -261,18 +258,8 @@ class SyntheticBodies(Sequence[BodySample]):
         lower_leg = skin if rng.random() < 0.3 else trousers
         palette = np.stack([skin, shirt, sleeve, trousers, lower_leg, shoes])
         colors = palette[self._regions] * rng.uniform(0.96, 1.04, (len(self._regions), 1))
-        image, _ = render(background(rng, size), camera, vertices + transl, self._faces, colors, _light(rng),
-                          rng.uniform(0.25, 0.5))
-        joints_3d = joints + transl
-        return BodySample(
-            image=camera_effects(rng, image),
-            box=_box(camera.project(vertices + transl), 0.03),
-            joints_2d=camera.project(joints_3d).astype(np.float32),
-            joints_3d=joints_3d.astype(np.float32),
-            global_orient=p.global_orient,
-            body_pose=p.body_pose,
-            betas=p.betas,
-        )
+        return BodySample(**_photograph(rng, size, camera, transl, (vertices, self._faces, colors), vertices, joints,
+                                        0.03), global_orient=p.global_orient, body_pose=p.body_pose, betas=p.betas)
 
 
 def read_hands(root: Path | None, split: str) -> SyntheticHands:
