@@ -192,7 +192,7 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
     import smplx_jax
     from jaxmocap.frame_source import open_media
     from jaxmocap.motion import lens, motion_params
-    from jaxmocap.overlay import body_up, mesh_over_frame, side_view
+    from jaxmocap.overlay import Posed, body_up, mesh_over_frame, side_view
 
     model = smplx_jax.load_model(smplx_jax.default_model_path())
     faces = np.asarray(model.faces)
@@ -212,7 +212,8 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
             left = mesh_over_frame(images[t], vertices, faces, float(motion["camera_scale"][t]),
                                    motion["camera_trans"][t], scale, *lens(motion))
             lo, hi = vertices.min(0), vertices.max(0)
-            right = side_view(vertices, faces, left.shape[1::-1], 0.75 * left.shape[0] / (hi - lo).max(), (lo + hi) / 2,
+            right = side_view([Posed(0, vertices, 1.0, np.zeros(2))], faces, left.shape[1::-1],
+                              0.75 * left.shape[0] / (hi - lo).max(), (lo + hi) / 2,
                               up=body_up(motion["global_orient"][motion["valid"]]))
             tile = np.concatenate([left, right], axis=1)
             cv2.putText(tile, f"{name} frame {t}: {errors[t]:.0f} mm", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.6,

@@ -34,10 +34,11 @@ def _cmd_run(args):
 
     config = RunConfig(
         args.input, model=args.model, weights=args.weights, integration=args.integration, hand_boxes=args.hand_boxes,
-        keypoints=args.keypoints, start=args.start, end=args.end, stride=args.stride, chunk_size=args.chunk,
+        keypoints=args.keypoints, max_people=args.max_people, start=args.start, end=args.end, stride=args.stride,
+        chunk_size=args.chunk,
         iterations=args.iterations, focal_length=args.focal_length, smooth=not args.no_smooth,
         overlay=not args.no_overlay, exports=tuple(f for f in args.export.split(",") if f),
-        frankmocap_pkl=args.frankmocap_pkl, progress=not args.quiet)
+        frankmocap_pkl=args.frankmocap_pkl, save_frames=args.save_frames, progress=not args.quiet)
     _print_report(run(config, args.out))
 
 
@@ -106,8 +107,13 @@ def _parser() -> argparse.ArgumentParser:
                         "the body regressor's projected hands, FrankMocap's fast mode (default: %(default)s)")
     p.add_argument("--frankmocap-pkl", action="store_true",
                    help="also FrankMocap's per-frame prediction pickles in DIR/mocap/ (its --save_pred_pkl)")
+    p.add_argument("--save-frames", action="store_true",
+                   help="also the video's frames as DIR/frames/<frame:05d>.jpg, the images FrankMocap's pickles name")
+    p.add_argument("--max-people", type=int, default=4, metavar="N",
+                   help="people tracked at most, each with an identity and DIR/people/<id>/motion.npz; DIR/motion.npz "
+                        "is the one seen in most frames (default: %(default)s)")
     p.add_argument("--keypoints", type=Path, default=None,
-                   help="OpenPose JSON folder to fit to instead of the detector's 2D keypoints")
+                   help="OpenPose JSON folder of one person to fit to instead of the detector's 2D keypoints")
     p.add_argument("--start", type=int, default=0, help="first frame (default: 0)")
     p.add_argument("--end", type=int, default=None, help="stop before this frame")
     p.add_argument("--stride", type=int, default=1, help="use every n-th frame (default: 1)")
@@ -125,7 +131,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, required=True, help="output folder for the JSON files")
     p.add_argument("--overlay", action="store_true", help="also draw the skeletons (images or a video)")
-    p.add_argument("--max-people", type=int, default=1, help="people per frame (default: %(default)s)")
+    p.add_argument("--max-people", type=int, default=4, help="people per frame, each with a person_id in a video "
+                                                              "(default: %(default)s)")
     p.add_argument("--no-hands", action="store_true", help="body keypoints only")
     p.add_argument("--models", type=Path, default=None, help="folder holding the four mediapipe .tflite files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

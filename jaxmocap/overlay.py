@@ -1,7 +1,8 @@
-"""The overlay video: each frame with the posed mesh drawn over it, beside a side view of the same mesh."""
+"""The overlay video: each frame with the posed meshes of its people drawn over it, beside a side view of them."""
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -13,21 +14,70 @@ from smplx_jax.rotations import rotvec_to_rotmat
 _TURN = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # a quarter turn about the image's y axis
 
 
+COLOURS = ((150, 175, 215), (120, 200, 140), (215, 160, 120), (110, 150, 235), (200, 130, 200), (120, 210, 220))
+
+
+def person_colour(person_id: int) -> tuple[int, int, int]:
+    """The BGR colour a person is drawn in, by identity."""
+    return COLOURS[person_id % len(COLOURS)]
+
+
+@dataclass(frozen=True)
+class Posed:
+    """One person in one frame: identity, posed vertices ``(V, 3)`` (``transl`` included, the image-aligned frame of
+    motion.npz) and the weak-perspective camera."""
+
+    person_id: int
+    vertices: np.ndarray
+    camera_scale: float
+    camera_trans: np.ndarray
+
+
+def mesh_pixels(vertices: np.ndarray, camera_scale: float, camera_trans: np.ndarray,
+                focal_length: float | None = None, principal_point: np.ndarray | None = None,
+                depth_unit: float | None = None) -> np.ndarray:
+    """``(V, 3)`` pixel x, y and a depth of the vertices where the camera puts them: the pinhole of
+    ``focal_length`` and ``principal_point`` when given (depth in pixels at ``depth_unit`` metres, default the
+    mesh's median depth), else the weak-perspective one."""
+    if focal_length is None:
+        return np.concatenate([vertices[:, :2] * camera_scale + camera_trans, vertices[:, 2:] * camera_scale], 1)
+    depth = vertices[:, 2:]
+    unit = np.median(depth) if depth_unit is None else depth_unit
+    return np.concatenate([focal_length * vertices[:, :2] / depth + principal_point, depth * focal_length / unit], 1)
+
+
 def mesh_over_frame(frame: np.ndarray, vertices: np.ndarray, faces: np.ndarray, camera_scale: float,
                     camera_trans: np.ndarray, scale: float = 1.0, focal_length: float | None = None,
                     principal_point: np.ndarray | None = None) -> np.ndarray:
-    """The frame (resized by ``scale``) with the mesh drawn where the camera puts it: the pinhole of
-    ``focal_length`` and ``principal_point`` when given, else the weak-perspective one.
+    """The frame (resized by ``scale``) with the mesh drawn where the camera puts it (`mesh_pixels`)."""
+    return people_over_frame(frame, [Posed(0, vertices, camera_scale, camera_trans)], faces, scale, focal_length,
+                             principal_point, labels=False)
 
-    ``vertices (V, 3)``: the posed model (``transl`` included) in the image-aligned frame of motion.npz."""
+
+def people_over_frame(frame: np.ndarray, people: list[Posed], faces: np.ndarray, scale: float = 1.0,
+                      focal_length: float | None = None, principal_point: np.ndarray | None = None,
+                      labels: bool = True) -> np.ndarray:
+    """The frame (resized by ``scale``) with each person's mesh drawn in their colour, nearer ones hiding farther
+    ones, and (``labels``) their identity above their head."""
     image = cv2.resize(frame, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale != 1 else frame
-    if focal_length is None:
-        points = np.concatenate([vertices[:, :2] * camera_scale + camera_trans, vertices[:, 2:] * camera_scale], 1)
-    else:  # depth in pixels at the body's distance, as the weak-perspective case has it
-        depth = vertices[:, 2:]
-        points = np.concatenate([focal_length * vertices[:, :2] / depth + principal_point,
-                                 depth * focal_length / np.median(depth)], axis=1)
-    return draw_mesh(image, points * scale, faces, opacity=0.75)
+    if not people:
+        return image.copy()
+    unit = np.median(np.concatenate([p.vertices[:, 2] for p in people]))
+    points = [mesh_pixels(p.vertices, p.camera_scale, p.camera_trans, focal_length, principal_point, unit) * scale
+              for p in people]
+    drawn = draw_mesh(image, *_joined(points, faces, [person_colour(p.person_id) for p in people]), opacity=0.75)
+    for person, xyz in zip(people if labels else (), points):
+        top = xyz[np.argmin(xyz[:, 1]), :2]
+        cv2.putText(drawn, str(person.person_id), (int(top[0]) - 10, int(top[1]) - 12), cv2.FONT_HERSHEY_SIMPLEX,
+                    1.2, person_colour(person.person_id), 3, cv2.LINE_AA)
+    return drawn
+
+
+def _joined(points: list[np.ndarray], faces: np.ndarray, colours: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Several meshes of the same faces as one: stacked points, offset faces and a colour per face."""
+    count = len(points[0])
+    joined_faces = np.concatenate([faces + k * count for k in range(len(points))])
+    return np.concatenate(points), joined_faces, np.repeat(np.asarray(colours, np.float64), len(faces), axis=0)
 
 
 def upright(up: np.ndarray) -> np.ndarray:
@@ -46,28 +96,33 @@ def body_up(global_orient: np.ndarray) -> np.ndarray:
     return np.asarray(rotvec_to_rotmat(np.asarray(global_orient, np.float32)))[:, :, 1].mean(0)
 
 
-def side_view(vertices: np.ndarray, faces: np.ndarray, size: tuple[int, int], pixels_per_metre: float,
+def side_view(people: list[Posed], faces: np.ndarray, size: tuple[int, int], pixels_per_metre: float,
               centre: np.ndarray, detail: float = 0.5, up: np.ndarray | None = None) -> np.ndarray:
-    """The mesh seen from the person's side (the image's x axis turned into depth), stood up on ``up`` (the
+    """The people's meshes seen from the side (the image's x axis turned into depth), stood up on ``up`` (the
     camera-frame vertical, default the image's), on a plain background; rendered at ``detail`` times the size
     and scaled up (rasterising cost grows with the pixels covered)."""
     width, height = size
     small = (max(1, round(width * detail)), max(1, round(height * detail)))
     level = np.eye(3) if up is None else upright(up)
-    turned = (vertices - centre) @ (_TURN @ level).T * (pixels_per_metre * detail)
-    points = np.concatenate([turned[:, :2] + [small[0] / 2, small[1] / 2], turned[:, 2:]], axis=1)
-    image = draw_mesh(np.full((small[1], small[0], 3), 235, np.uint8), points, faces)
+    points = []
+    for person in people:
+        turned = (person.vertices - centre) @ (_TURN @ level).T * (pixels_per_metre * detail)
+        points.append(np.concatenate([turned[:, :2] + [small[0] / 2, small[1] / 2], turned[:, 2:]], axis=1))
+    background = np.full((small[1], small[0], 3), 235, np.uint8)
+    image = draw_mesh(background, *_joined(points, faces, [person_colour(p.person_id) for p in people])) if people \
+        else background
     return cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
 
 
 class OverlayWriter:
-    """Writes the side-by-side overlay video (``mp4v``), the frames scaled so that the height is at most
-    ``max_height``; the side view keeps the first frame's scale and follows the body's centre. Frames are
-    composed in parallel threads (the rasteriser's numpy work releases the GIL)."""
+    """Writes the side-by-side overlay video (``mp4v``) of the people in each frame, the frames scaled so that the
+    height is at most ``max_height``; the side view keeps the first frame's scale and follows the people's centre.
+    Frames are composed in parallel threads (the rasteriser's numpy work releases the GIL)."""
 
-    def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, max_height: int = 960,
-                 lens: tuple = (None, None), up: np.ndarray | None = None):
+    def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, faces: np.ndarray,
+                 max_height: int = 960, lens: tuple = (None, None), up: np.ndarray | None = None):
         width, height = frame_size
+        self.faces = np.asarray(faces)
         self.lens = lens  # (focal_length, principal_point) of a pinhole camera, or (None, None)
         self.up = up  # the side view's vertical in the camera frame (`body_up`)
         self.scale = min(1.0, max_height / height)
@@ -80,24 +135,24 @@ class OverlayWriter:
         self.pixels_per_metre = None
         self.pool = ThreadPoolExecutor(os.cpu_count() or 1)
 
-    def compose(self, frame, vertices=None, faces=None, camera_scale=None, camera_trans=None) -> np.ndarray:
-        """One output image; without vertices (no person) the frame as it is beside an empty side view."""
-        if vertices is None:
-            left = cv2.resize(frame, self.panel, interpolation=cv2.INTER_AREA)
-            right = np.full((self.panel[1], self.panel[0], 3), 235, np.uint8)
-        else:
-            left = mesh_over_frame(frame, vertices, faces, camera_scale, camera_trans, self.scale, *self.lens)
-            if left.shape[1::-1] != self.panel:
-                left = cv2.resize(left, self.panel)
-            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-            if self.pixels_per_metre is None:
-                self.pixels_per_metre = 0.75 * self.panel[1] / (hi - lo).max()
-            right = side_view(vertices, faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up)
+    def compose(self, frame: np.ndarray, people: list[Posed] = ()) -> np.ndarray:
+        """One output image: the frame with the people drawn over it beside the side view (empty without
+        anyone)."""
+        left = people_over_frame(frame, list(people), self.faces, self.scale, *self.lens)
+        if left.shape[1::-1] != self.panel:
+            left = cv2.resize(left, self.panel, interpolation=cv2.INTER_AREA)
+        if not people:
+            return np.concatenate([left, np.full((self.panel[1], self.panel[0], 3), 235, np.uint8)], axis=1)
+        everyone = np.concatenate([p.vertices for p in people])
+        lo, hi = everyone.min(axis=0), everyone.max(axis=0)
+        if self.pixels_per_metre is None:
+            self.pixels_per_metre = 0.75 * self.panel[1] / (hi - lo).max()
+        right = side_view(list(people), self.faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up)
         return np.concatenate([left, right], axis=1)
 
-    def write(self, *frames) -> None:
-        """Frames in order, each an argument tuple of `compose`, composed in parallel threads."""
-        first = next((f for f in frames if len(f) > 1 and f[1] is not None), None)
+    def write(self, *frames: tuple[np.ndarray, list[Posed]]) -> None:
+        """Frames in order, each ``(frame, people)``, composed in parallel threads."""
+        first = next((f for f in frames if len(f[1])), None)
         if first is not None and self.pixels_per_metre is None:
             self.compose(*first)  # fixes the side view's scale before the threads share it
         for image in self.pool.map(lambda args: self.compose(*args), frames):

@@ -56,13 +56,15 @@ def draw_mesh(image: np.ndarray, points: np.ndarray, faces: np.ndarray, color=(1
               opacity: float = 1.0) -> np.ndarray:
     """A copy of a BGR ``image`` with the mesh drawn over it, flat-shaded by a light at the upper left front.
 
-    ``points (V, 3)``: pixel x, pixel y, depth; ``faces (F, 3)`` counter-clockwise seen from outside.
+    ``points (V, 3)``: pixel x, pixel y, depth; ``faces (F, 3)`` counter-clockwise seen from outside; ``color``
+    one BGR colour, or one per face ``(F, 3)`` (several meshes drawn as one, each hiding the others).
     """
     ids = rasterize(points, faces, (image.shape[1], image.shape[0]))
     shade = face_shading(points, faces, _LIGHT, 0.3)
     covered = ids >= 0
     out = image.copy()
-    mesh = shade[ids[covered], None] * np.asarray(color, np.float64)
+    color = np.asarray(color, np.float64)
+    mesh = shade[ids[covered], None] * (color[ids[covered]] if color.ndim == 2 else color)
     out[covered] = np.clip(opacity * mesh + (1 - opacity) * out[covered], 0, 255).astype(np.uint8)
     return out
 

@@ -8,7 +8,7 @@ import numpy as np
 from conftest import load
 
 import smplx_jax
-from jaxmocap.overlay import OverlayWriter, body_up, mesh_over_frame, upright
+from jaxmocap.overlay import OverlayWriter, Posed, body_up, mesh_over_frame, upright
 from jaxmocap.poses import example_pose
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -66,10 +66,11 @@ def test_overlay_video_frames_and_size(default_model_dir, tmp_path):
     vertices, _ = _posed(model)
     cap = cv2.VideoCapture(str(CLIP))
     path = tmp_path / "overlay.mp4"
-    with OverlayWriter(path, (1080, 1920), fps=30.0) as writer:
+    with OverlayWriter(path, (1080, 1920), fps=30.0, faces=np.asarray(model.faces)) as writer:
         frames = [cap.read()[1] for _ in range(5)]
-        posed = (np.asarray(model.faces), 700.0, np.array([540.0, 900.0]))
-        writer.write(*[(frame,) if k == 2 else (frame, vertices, *posed) for k, frame in enumerate(frames)])
+        people = [Posed(0, vertices, 700.0, np.array([540.0, 900.0])),
+                  Posed(1, vertices + [0.3, 0.0, 0.0], 700.0, np.array([540.0, 900.0]))]
+        writer.write(*[(frame, people[:k % 3]) for k, frame in enumerate(frames)])
     video = cv2.VideoCapture(str(path))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
     ok, first = video.read()

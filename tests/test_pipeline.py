@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import pickle
+import pickletools
 import struct
 from pathlib import Path
 
@@ -95,24 +96,59 @@ PERSON_SHAPES = {"pred_camera": (3,), "bbox_top_left": (2,), "pred_body_pose": (
 
 def test_frankmocap_pickles_reproduce_the_projection(result):
     """--frankmocap-pkl: FrankMocap's layout, and its own layer (mean-relative hands, no translation) and camera
-    formulas give our stored projection."""
+    formulas give our stored projection; the files name only what NumPy 1.x (FrankMocap's) can unpickle."""
     out, _ = result
     motion = read_motion(out / "motion.npz")
     files = sorted((out / "mocap").iterdir())
     assert [f.name for f in files] == [f"{20 + t:05d}_prediction_result.pkl" for t in range(FRAMES)]
     data = [pickle.loads(f.read_bytes()) for f in files]
-    people = [d["pred_output_list"][0] for d in data]
-    for t, (d, person) in enumerate(zip(data, people)):
+    for t, d in enumerate(data):
         assert list(d) == PKL_KEYS and (d["demo_type"], d["smpl_type"], d["save_mesh"]) == ("frank", "smplx", False)
         assert d["image_path"] == str((out / "frames" / f"{20 + t:05d}.jpg").absolute())
-        assert d["body_bbox_list"][0].shape == (4,) and set(d["hand_bbox_list"][0]) == {"left_hand", "right_hand"}
-        assert {k: person[k].shape for k in PERSON_SHAPES} == PERSON_SHAPES and "pred_vertices_smpl" not in person
-        assert all(person[k].dtype == np.float32 for k in PERSON_SHAPES if k != "bbox_top_left")
-        _, ratio, top_left = ref.body_crop(np.zeros((1080, 1920, 3), np.uint8), d["body_bbox_list"][0])
+        assert len(d["pred_output_list"]) == len(d["body_bbox_list"]) == len(d["hand_bbox_list"]) == 1
+    assert_frankmocap_projection(data, 0, motion)
+    for f in files:
+        ops = [(op.name, arg) for op, arg, _ in pickletools.genops(f.read_bytes())]
+        modules = {arg.split()[0] for name, arg in ops if name == "GLOBAL"}
+        assert "STACK_GLOBAL" not in dict(ops) and modules <= {"numpy", "numpy.core.multiarray", "_codecs",
+                                                               "collections"}, modules
+
+
+def test_frankmocap_pickles_hold_every_person(result, tmp_path):
+    """Two people in each frame (the second one 0.4 m to the side and 1 m farther, in a smaller box, hands unseen):
+    both in each pickle, the larger box first, each reproducing its own projection through FrankMocap's layer and
+    camera formulas."""
+    from jaxmocap.export.frankmocap import write_frankmocap_pkls
+
+    out, _ = result
+    motion = read_motion(out / "motion.npz")
+    data = [pickle.loads(f.read_bytes()) for f in sorted((out / "mocap").iterdir())]
+    xyxy = lambda b: np.concatenate([b[:2], b[:2] + b[2:]]) if b is not None else np.full(4, np.nan)  # noqa: E731
+    body = np.stack([xyxy(d["body_bbox_list"][0]) for d in data])
+    hands = np.stack([[xyxy(d["hand_bbox_list"][0][f"{s}_hand"]) for s in ("left", "right")] for d in data])
+    other = dict(motion, transl=motion["transl"] + [0.4, 0.0, 1.0])
+    smaller = np.concatenate([body[:, :2], body[:, :2] + 0.8 * (body[:, 2:] - body[:, :2])], axis=1)
+    people = {0: (motion, body, hands), 1: (other, smaller, np.full_like(hands, np.nan))}
+    files = write_frankmocap_pkls(tmp_path, smplx_jax.load_model(smplx_jax.default_model_path()), people,
+                                  [tmp_path / f"{t:05d}.jpg" for t in range(FRAMES)])
+    both = [pickle.loads(f.read_bytes()) for f in files]
+    assert len(both) == FRAMES and all(len(d["pred_output_list"]) == 2 for d in both)
+    assert_frankmocap_projection(both, 0, motion)
+    assert_frankmocap_projection(both, 1, other)
+
+
+def assert_frankmocap_projection(data, k, motion):
+    """Person ``k`` of each pickle in ``data``: FrankMocap's layout, and its SMPL-X layer and camera formulas put
+    its joints where ``motion`` (its frames) puts them with our weak-perspective camera."""
+    people = [d["pred_output_list"][k] for d in data]
+    for d, person in zip(data, people):
+        assert {key: person[key].shape for key in PERSON_SHAPES} == PERSON_SHAPES and "pred_vertices_smpl" not in person
+        assert all(person[key].dtype == np.float32 for key in PERSON_SHAPES if key != "bbox_top_left")
+        _, ratio, top_left = ref.body_crop(np.zeros((1080, 1920, 3), np.uint8), d["body_bbox_list"][k])
         assert person["bbox_scale_ratio"] == pytest.approx(ratio) and np.array_equal(person["bbox_top_left"], top_left)
-    t = lambda k: torch.from_numpy(np.stack([p[k][0] for p in people]))  # noqa: E731
+    t = lambda key: torch.from_numpy(np.stack([p[key][0] for p in people]))  # noqa: E731
     layer = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
-                         flat_hand_mean=False, num_betas=10, batch_size=FRAMES)  # FrankMocap's SMPLX layer
+                         flat_hand_mean=False, num_betas=10, batch_size=len(people))  # FrankMocap's SMPLX layer
     with torch.no_grad():
         joints = layer(global_orient=t("pred_body_pose")[:, :3], body_pose=t("pred_body_pose")[:, 3:66],
                        betas=t("pred_betas"), left_hand_pose=t("pred_left_hand_pose"),
@@ -122,15 +158,16 @@ def test_frankmocap_pickles_reproduce_the_projection(result):
         theirs = frankmocap_to_image(joints[n], person["pred_camera"][0], person["pred_camera"][1:],
                                      person["bbox_scale_ratio"], person["bbox_top_left"])
         np.testing.assert_allclose(theirs[:, :2], ours[n], atol=0.5)
-        stored = np.concatenate([person[k] for k in ("pred_body_joints_img", "pred_lhand_joints_img",
-                                                     "pred_rhand_joints_img")])
+        stored = np.concatenate([person[key] for key in ("pred_body_joints_img", "pred_lhand_joints_img",
+                                                         "pred_rhand_joints_img")])
         openpose = np.concatenate([np.arange(25), 49 + np.arange(42)])
         np.testing.assert_allclose(stored[openpose, :2], ours[n, constants.OPENPOSE67_FROM_SMPLX], atol=0.5)
-        assert np.isnan(stored[[27, 28, *range(37, 44)]]).all() and np.isfinite(np.delete(stored, [27, 28, *range(
-            37, 44)], axis=0)).all()
+        extra = [27, 28, 37, 39, 40, 41, 42, 43]  # SPIN's hips, neck, pelvis, thorax, spine, jaw, head
+        np.testing.assert_allclose(stored[extra, :2], ours[n, [2, 1, 12, 0, 9, 6, 22, 15]], atol=0.5)
+        assert np.isfinite(stored).all() and stored[38, 1] < stored[43, 1]  # the top of the head above the head
         for side, index1, ids in (("left", 25, constants.LEFT_HAND21_FROM_SMPLX),
                                   ("right", 40, constants.RIGHT_HAND21_FROM_SMPLX)):
-            box = data[n]["hand_bbox_list"][0][f"{side}_hand"]
+            box = data[n]["hand_bbox_list"][k][f"{side}_hand"]
             if box is None:
                 assert person[f"{side}_hand_camera"] is None and person[f"{side}_hand_local_orient_hand"] is None
                 continue
@@ -337,7 +374,7 @@ def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
     other.write_bytes(CLIP.read_bytes())
     variants = dict(source=other, model=None, weights=tmp_path / "weights", integration="copy-paste",
                     hand_boxes="body", keypoints=tmp_path / "keypoints", start=1, end=9, stride=2, chunk_size=64,
-                    iterations=5, focal_length=1000.0)
+                    iterations=5, focal_length=1000.0, max_people=2)
     keyed = {f.name for f in dataclasses.fields(RunConfig) if f.metadata != AT_THE_END}
     assert set(variants) == keyed
     for name, value in variants.items():
@@ -356,6 +393,7 @@ def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
     (dict(integration="eft"), "needs --weights"), (dict(integration="magic"), "unknown integration"),
     (dict(hand_boxes="body"), "needs --weights"), (dict(focal_length=-3.0), "focal-length must be positive"),
     (dict(exports=("fbx",)), "unknown export format"), (dict(chunk_size=0), "chunk-size must be positive"),
+    (dict(max_people=0), "max-people must be positive"),
 ])
 def test_run_config_refuses_what_cannot_run(options, message):
     with pytest.raises(InputError, match=message):

@@ -45,6 +45,17 @@ def appearance(image: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
     return (hist / max(hist.sum(), 1.0)).astype(np.float32)
 
 
+def identify(tracker: "IdentityTracker | None", image: np.ndarray, people: list) -> list[int]:
+    """Identities of the detector's people (`jaxmocap.detect.Person`) in one BGR frame: the tracker's, or without
+    one their order in the frame."""
+    if tracker is None:
+        return list(range(len(people)))
+    if not people:
+        return tracker(np.zeros((0, 33, 3)), np.zeros((0, APPEARANCE_SIZE), np.float32))
+    landmarks = np.stack([p.body[:, [0, 1, 3]] for p in people])
+    return tracker(landmarks, np.stack([appearance(image, p.body) for p in people]))
+
+
 def landmark_distance(track: Track, landmarks: np.ndarray, frame: int) -> float:
     """Mean distance, in the track's heights, of the landmarks seen in both from where the track expects them."""
     both = (track.landmarks[:, 2] >= MIN_VISIBILITY) & (landmarks[:, 2] >= MIN_VISIBILITY)

@@ -1,4 +1,5 @@
-"""Run the detector over a video file, an image folder or a single image and write OpenPose JSON per frame."""
+"""Run the detector over a video file, an image folder or a single image and write OpenPose JSON per frame (in a
+video each person with a stable ``person_id``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from ..frame_source import MediaError, open_media
 from .detector import Detector, Person, as_bgr
+from .identities import IdentityTracker, identify
 from .draw import draw_openpose
 from .openpose import body25_from_blazepose, hand21, json_name, write_openpose_json
 
@@ -44,6 +46,7 @@ def detect_media(input: str | os.PathLike, out_dir: str | os.PathLike, overlay: 
     out.mkdir(parents=True, exist_ok=True)
     still = media.kind in ("image", "images")
     detector = Detector(static_image_mode=still, max_people=max_people, hands=hands, model_dir=model_dir)
+    tracker = None if still else IdentityTracker()
     written: list[Path] = []
     writer = None
     if overlay and still:
@@ -55,9 +58,12 @@ def detect_media(input: str | os.PathLike, out_dir: str | os.PathLike, overlay: 
                 image = as_bgr(frame)
             except ValueError as err:
                 raise MediaError(f"{input}: frame {index}: {err}") from None
-            keypoints = to_openpose(detector(image))
+            people = detector(image)
+            ids = identify(tracker, image, people)
+            order = np.argsort(ids, kind="stable")
+            keypoints = to_openpose([people[k] for k in order])
             name = json_name(media.stems[n], None) if still else json_name(media.stem, index)
-            written.append(write_openpose_json(out / name, keypoints))
+            written.append(write_openpose_json(out / name, keypoints, [ids[k] for k in order] if tracker else None))
             if overlay and still:
                 cv2.imwrite(str(out / "overlay" / f"{media.stems[n]}.jpg"), draw_openpose(image, keypoints))
             elif overlay:

@@ -47,19 +47,27 @@ def hand21(hand: np.ndarray | None, confidence: float) -> np.ndarray:
     return out
 
 
-def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray) -> Path:
-    """Write (P, 67, 3) keypoints as one OpenPose 1.3 JSON file, atomically. Returns the path."""
+def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray, person_ids=None) -> Path:
+    """Write (P, 67, 3) keypoints as one OpenPose 1.3 JSON file, atomically, each person with the ``person_id``
+    OpenPose's tracker writes (``[id]``; ``[-1]`` untracked, as OpenPose without its tracker). Returns the path."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     if keypoints.ndim != 3 or keypoints.shape[1:] != (NUM_KEYPOINTS, 3):
         raise ValueError(f"keypoints must have shape (num_people, 67, 3), got {keypoints.shape}")
-    flat = lambda a: [round(float(v), 3) for v in a.reshape(-1)]  # noqa: E731
+    person_ids = [-1] * len(keypoints) if person_ids is None else [int(i) for i in person_ids]
+    if len(person_ids) != len(keypoints):
+        raise ValueError(f"{len(person_ids)} person ids for {len(keypoints)} people")
     people = [{
-        "pose_keypoints_2d": flat(p[BODY_SLICE]),
-        "hand_left_keypoints_2d": flat(p[LEFT_HAND_SLICE]),
-        "hand_right_keypoints_2d": flat(p[RIGHT_HAND_SLICE]),
+        "person_id": [person_id],
+        "pose_keypoints_2d": _flat(p[BODY_SLICE]),
+        "hand_left_keypoints_2d": _flat(p[LEFT_HAND_SLICE]),
+        "hand_right_keypoints_2d": _flat(p[RIGHT_HAND_SLICE]),
         "face_keypoints_2d": [],
-    } for p in keypoints]
+    } for p, person_id in zip(keypoints, person_ids)]
     return atomic_write_text(path, json.dumps({"version": 1.3, "people": people}, separators=(",", ":")))
+
+
+def _flat(a: np.ndarray) -> list[float]:
+    return [round(float(v), 3) for v in a.reshape(-1)]
 
 
 def _part(person: dict, key: str, count: int, path) -> np.ndarray:

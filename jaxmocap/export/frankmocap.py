@@ -13,11 +13,13 @@ joints, unused by SMPL-X, as zeros); hand poses (1, 45) relative to the mean han
 the body crop, ``pixel = (X s + t) 112 / bbox_scale_ratio + bbox_top_left + 112 / bbox_scale_ratio``
 (``mocap_utils/coordconv.py``); each hand's camera likewise for its crop, ``((X + t) s) ...`` with X relative to
 the hand's index1 joint. ``pred_body_joints_img`` holds SPIN's 49 joints; the 9 that FrankMocap regresses with its
-own extra regressor file (LSP, MPII, H36M joints) are NaN. We keep no body-only wrist, so ``*_orient_body`` hold
-the integrated wrist, as ``*_orient_hand`` do (None where the hand was not seen, as in FrankMocap).
+own extra regressor file (LSP, MPII, H36M joints) are the nearest SMPL-X joints. We keep no body-only wrist, so
+``*_orient_body`` hold the integrated wrist, as ``*_orient_hand`` do (None where the hand was not seen, as in
+FrankMocap). Every person of a frame is in ``pred_output_list``, largest box first, as FrankMocap orders them.
 """
 
 import functools
+import io
 import pickle
 from collections import OrderedDict
 from pathlib import Path
@@ -36,7 +38,12 @@ _HALF = SIZE / 2
 _SMPLX_FROM_SPIN_SMPL = list(range(22)) + [28, 43] + list(range(55, 76))  # FrankMocap's SMPLX wrapper, 45 joints
 _SPIN_JOINT_MAP = [24, 12, 17, 19, 21, 16, 18, 20, 0, 2, 5, 8, 1, 4, 7, 25, 26, 27, 28, 29, 30, 31, 32, 33, 34,
                    8, 5, 45, 46, 4, 7, 21, 19, 17, 16, 18, 20, 47, 48, 49, 50, 51, 52, 53, 24, 26, 25, 28, 27]
-SPIN49_FROM_SMPLX = np.array([_SMPLX_FROM_SPIN_SMPL[j] if j < 45 else -1 for j in _SPIN_JOINT_MAP])  # -1: extra
+# SPIN's extra joints (FrankMocap regresses them with a file of its own) as the nearest SMPL-X joints: hips, neck
+# (LSP), pelvis (MPII), thorax (MPII), spine (H36M), jaw (H36M), head (H36M); the top of the head (LSP, 48) is the
+# head joint extended from the neck by as much again.
+_NECK, _HEAD = constants.JOINT_NAMES.index("neck"), constants.JOINT_NAMES.index("head")
+_EXTRA_FROM_SMPLX = {45: 2, 46: 1, 47: _NECK, 48: -1, 49: 0, 50: 9, 51: 6, 52: 22, 53: _HEAD}
+SPIN49_FROM_SMPLX = np.array([_SMPLX_FROM_SPIN_SMPL[j] if j < 45 else _EXTRA_FROM_SMPLX[j] for j in _SPIN_JOINT_MAP])
 _HANDS = (("left", constants.LEFT_WRIST, 25, slice(25, 46)), ("right", constants.RIGHT_WRIST, 40, slice(46, 67)))
 
 
@@ -79,8 +86,9 @@ def _person(model_arrays, motion, t, joints, wrists, body_box, hand_boxes, image
     out = {"faces": model_arrays["faces"], "bbox_scale_ratio": ratio, "bbox_top_left": np.asarray(top_left),
            "pred_camera": camera, "pred_body_pose": body_pose.astype(np.float32).reshape(1, 72),
            "pred_betas": np.asarray(motion["betas"][t], np.float32).reshape(1, -1)}
-    spin = _to_image(rest[np.maximum(SPIN49_FROM_SMPLX, 0)], camera[0], camera[1:], ratio, top_left)
-    out["pred_body_joints_img"] = np.where((SPIN49_FROM_SMPLX >= 0)[:, None], spin, np.nan).astype(np.float32)
+    spin = rest[np.maximum(SPIN49_FROM_SMPLX, 0)]
+    spin[SPIN49_FROM_SMPLX < 0] = 2 * rest[_HEAD] - rest[_NECK]
+    out["pred_body_joints_img"] = _to_image(spin, camera[0], camera[1:], ratio, top_left).astype(np.float32)
     pixels = scale * joints[:, :2] + trans
     for k, (side, wrist, index1, openpose) in enumerate(_HANDS):
         hand_joints = rest[np.asarray(constants.OPENPOSE67_FROM_SMPLX)[openpose]]
@@ -105,32 +113,63 @@ def _person(model_arrays, motion, t, joints, wrists, body_box, hand_boxes, image
     return out
 
 
-def write_frankmocap_pkls(out_dir, model: smplx_jax.BodyModel, motion: dict, body_boxes, hand_boxes,
-                          image_paths) -> list[Path]:
-    """``out_dir/mocap/<stem>_prediction_result.pkl`` for every valid frame of ``motion`` (docs/formats.md) with a body
-    box. ``body_boxes`` (T, 4) and ``hand_boxes`` (T, 2, 4) left, right: x0, y0, x1, y1 pixels, NaN where missing;
-    ``image_paths``: the image each frame is (FrankMocap names a video's frames ``frames/<frame:05d>.jpg``)."""
-    frames = len(motion["valid"])
-    body_boxes, hand_boxes = np.asarray(body_boxes, np.float64), np.asarray(hand_boxes, np.float64)
-    if body_boxes.shape != (frames, 4) or hand_boxes.shape != (frames, 2, 4) or len(image_paths) != frames:
-        raise ValueError(f"expected body_boxes ({frames}, 4), hand_boxes ({frames}, 2, 4) and {frames} image paths, "
-                         f"got {body_boxes.shape}, {hand_boxes.shape} and {len(image_paths)}")
-    rows = np.flatnonzero(np.asarray(motion["valid"], bool) & np.all(np.isfinite(body_boxes), axis=1))
-    if not len(rows):
-        return []
-    params = motion_params(motion, model.num_expression, rows)
-    joints, wrists = (np.asarray(a, np.float64) for a in _joints_and_wrists(model, params))
+def write_frankmocap_pkls(out_dir, model: smplx_jax.BodyModel, people: dict, image_paths) -> list[Path]:
+    """``out_dir/mocap/<stem>_prediction_result.pkl`` for every frame with a valid person (docs/formats.md),
+    listing every such person, largest box first as FrankMocap orders them. ``people``: by identity, ``(motion,
+    body_boxes (T, 4), hand_boxes (T, 2, 4))`` with boxes left, right as x0, y0, x1, y1 pixels, NaN where missing;
+    ``image_paths``: the image each frame is (FrankMocap names a video's frames ``frames/<frame:05d>.jpg``). The
+    pickles load under NumPy 1.x (FrankMocap's) as under NumPy 2 (`numpy1_pickle`)."""
     arrays = {"faces": np.asarray(model.faces), "hand_mean": np.asarray(model.hand_mean, np.float64)}
-    image_size = tuple(int(v) for v in motion["image_size"])
+    frames = len(image_paths)
+    entries = [[] for _ in range(frames)]  # per frame: (area, body box, hand boxes, person)
+    for motion, body_boxes, hand_boxes in people.values():
+        body_boxes, hand_boxes = np.asarray(body_boxes, np.float64), np.asarray(hand_boxes, np.float64)
+        if len(motion["valid"]) != frames or body_boxes.shape != (frames, 4) or hand_boxes.shape != (frames, 2, 4):
+            raise ValueError(f"expected {frames} frames, body_boxes ({frames}, 4) and hand_boxes ({frames}, 2, 4), got "
+                             f"{len(motion['valid'])}, {body_boxes.shape} and {hand_boxes.shape}")
+        rows = np.flatnonzero(np.asarray(motion["valid"], bool) & np.all(np.isfinite(body_boxes), axis=1))
+        if not len(rows):
+            continue
+        params = motion_params(motion, model.num_expression, rows)
+        joints, wrists = (np.asarray(a, np.float64) for a in _joints_and_wrists(model, params))
+        image_size = tuple(int(v) for v in motion["image_size"])
+        for n, t in enumerate(rows):
+            person = _person(arrays, motion, t, joints[n], wrists[n], body_boxes[t], hand_boxes[t], image_size)
+            hands = {side: _xywh(hand_boxes[t, k]) if np.all(np.isfinite(hand_boxes[t, k])) else None
+                     for k, side in enumerate(("left_hand", "right_hand"))}
+            area = np.prod(body_boxes[t, 2:] - body_boxes[t, :2])
+            entries[t].append((area, _xywh(body_boxes[t]), hands, person))
     written = []
-    for n, t in enumerate(rows):
-        person = _person(arrays, motion, t, joints[n], wrists[n], body_boxes[t], hand_boxes[t], image_size)
-        hands = {side: _xywh(hand_boxes[t, k]) if np.all(np.isfinite(hand_boxes[t, k])) else None
-                 for k, side in enumerate(("left_hand", "right_hand"))}
+    for t, found in enumerate(entries):
+        if not found:
+            continue
+        found.sort(key=lambda entry: -entry[0])
         image_path = Path(image_paths[t]).absolute()
         data = OrderedDict(demo_type="frank", smpl_type="smplx", image_path=str(image_path),
-                           body_bbox_list=[_xywh(body_boxes[t])], hand_bbox_list=[hands], save_mesh=False,
-                           pred_output_list=[person])
+                           body_bbox_list=[e[1] for e in found], hand_bbox_list=[e[2] for e in found],
+                           save_mesh=False, pred_output_list=[e[3] for e in found])
         path = Path(out_dir) / "mocap" / f"{image_path.stem}_prediction_result.pkl"
-        written.append(atomic_write_bytes(path, pickle.dumps(data)))
+        written.append(atomic_write_bytes(path, numpy1_pickle(data)))
     return written
+
+
+class _Numpy1Pickler(pickle._Pickler):
+    """Python's pickler naming NumPy 2's ``numpy._core`` functions by their NumPy 1.x home ``numpy.core`` (which
+    NumPy 2 still serves), so that either loads the file."""
+
+    def save_global(self, obj, name=None):
+        module = getattr(obj, "__module__", None) or ""
+        if module == "numpy._core" or module.startswith("numpy._core."):
+            qualified = f"numpy.core{module[len('numpy._core'):]}\n{name or obj.__qualname__}\n"
+            self.write(pickle.GLOBAL + qualified.encode())
+            self.memoize(obj)
+            return
+        super().save_global(obj, name)
+
+
+def numpy1_pickle(obj) -> bytes:
+    """``pickle.dumps(obj)`` (protocol 2) that NumPy 1.x unpickles too: arrays and scalars reconstructed through
+    ``numpy.core`` rather than NumPy 2's ``numpy._core``."""
+    buffer = io.BytesIO()
+    _Numpy1Pickler(buffer, protocol=2).dump(obj)
+    return buffer.getvalue()

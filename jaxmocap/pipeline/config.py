@@ -27,7 +27,8 @@ class RunConfig:
     motion; the main one, seen in most frames, is ``motion.npz``).
     ``start``/``end``/``stride``: the frames used. ``chunk_size``: frames per resumable chunk. ``iterations``: fit
     iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``smooth``: temporal
-    smoothing; ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``: the outputs besides ``motion.npz``.
+    smoothing; ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``, ``save_frames`` (a video's frames as
+    images): the outputs besides the motions.
 
     A stored chunk is reused only under the same options (`chunk_key`), except those marked `AT_THE_END`.
     """
@@ -49,6 +50,7 @@ class RunConfig:
     overlay: bool = field(default=True, metadata=AT_THE_END)
     exports: tuple[str, ...] = field(default=(), metadata=AT_THE_END)
     frankmocap_pkl: bool = field(default=False, metadata=AT_THE_END)
+    save_frames: bool = field(default=False, metadata=AT_THE_END)
     progress: bool = field(default=True, metadata=AT_THE_END)
 
     def __post_init__(self):

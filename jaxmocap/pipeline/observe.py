@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from jaxmocap.detect import Detector, Person, to_openpose
-from jaxmocap.detect.identities import APPEARANCE_SIZE, IdentityTracker, appearance
+from jaxmocap.detect.identities import IdentityTracker, identify
 from jaxmocap.detect.openpose import LEFT_HAND_SLICE, RIGHT_HAND_SLICE
 
 
@@ -40,13 +40,7 @@ def observe_people(detector: Detector, tracker: IdentityTracker | None, frames: 
     people = {}
     for i, frame in enumerate(frames):
         found = detector(frame)
-        if tracker is None:
-            ids = list(range(len(found)))
-        else:
-            landmarks = np.stack([p.body[:, [0, 1, 3]] for p in found]) if found else np.zeros((0, 33, 3))
-            ids = tracker(landmarks, np.stack([appearance(frame, p.body) for p in found]) if found else
-                          np.zeros((0, APPEARANCE_SIZE)))
-        for person_id, person in zip(ids, found):
+        for person_id, person in zip(identify(tracker, frame, found), found):
             _record(people.setdefault(person_id, _no_one(len(frames))), i, person)
     return {person_id: Observations(**arrays) for person_id, arrays in sorted(people.items())}
 

@@ -1,8 +1,9 @@
-"""What a run writes besides motion.npz: the detections as OpenPose JSON (per chunk), and at the end FrankMocap's
+"""What a run writes besides the motions: the detections as OpenPose JSON (per chunk), and at the end FrankMocap's
 prediction pickles, the overlay video and the animation exports."""
 
 from pathlib import Path
 
+import cv2
 import jax
 import numpy as np
 from tqdm import tqdm
@@ -13,38 +14,42 @@ from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.export import animation, write_bvh, write_gltf
 from jaxmocap.export.frankmocap import write_frankmocap_pkls
 from jaxmocap.frame_source import Media, open_media
+from jaxmocap.io import atomic_write_bytes
 from jaxmocap.motion import lens, motion_params
-from jaxmocap.overlay import OverlayWriter, body_up
+from jaxmocap.overlay import OverlayWriter, Posed, body_up
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.config import EXPORT_FILES, RunConfig
-from jaxmocap.pipeline.records import Chunk
+from jaxmocap.pipeline.records import Chunk, Track
+
 _VERTICES = jax.jit(jax.vmap(lambda model, params: smplx_jax.forward(model, params).vertices, in_axes=(None, 0)))
 _BATCH = 16
 
 
-def write_overlay(path: Path, model: smplx_jax.BodyModel, motion: dict, source, start, end, stride,
-                  progress: bool = True) -> Path:
-    """The frames again, each with its fitted mesh drawn over it, beside a side view."""
-    media, frames = open_media(source, start, end, stride)
+def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dict], config: RunConfig,
+                  image_size: tuple[int, int], total: int) -> Path:
+    """The ``total`` frames of the run again, each with its people's fitted meshes drawn over it in their colours
+    with their identities, beside a side view of them."""
+    media, frames = open_media(config.source, config.start, config.end, config.stride)
     faces = np.asarray(model.faces)
-    valid = motion["valid"]
-    total = len(valid)
-    up = body_up(motion["global_orient"][valid]) if valid.any() else None
-    with OverlayWriter(path, media.size, media.fps, lens=lens(motion), up=up) as writer:
-        bar = tqdm(total=total, unit="frame", desc="overlay", disable=not progress)
-        done = 0
-        while done < total:
-            batch = [frame for _, (_, frame) in zip(range(_BATCH), frames)]
+    orients = [m["global_orient"][m["valid"]] for m in motions.values()]
+    up = body_up(np.concatenate(orients)) if sum(map(len, orients)) else None
+    lenses = lens(next(iter(motions.values()))) if motions else (None, None)
+    with OverlayWriter(path, image_size, media.fps, faces, lens=lenses, up=up) as writer, \
+            tqdm(total=total, unit="frame", desc="overlay", disable=not config.progress) as bar:
+        for start in range(0, total, _BATCH):
+            batch = [frame for _, (_, frame) in zip(range(min(_BATCH, total - start)), frames)]
             if not batch:
                 break
-            ids = np.arange(done, done + len(batch))
-            padded = pad_rows(ids, _BATCH)  # one compiled batch size
-            vertices = np.asarray(_VERTICES(model, motion_params(motion, model.num_expression, padded)))
-            writer.write(*[(frame, vertices[k], faces, motion["camera_scale"][i], motion["camera_trans"][i])
-                           if valid[i] else (frame,) for k, (i, frame) in enumerate(zip(ids, batch))])
-            done += len(batch)
+            rows = pad_rows(np.arange(start, start + len(batch)), _BATCH)  # one compiled batch size
+            people = [[] for _ in batch]
+            for person_id, motion in motions.items():
+                vertices = np.asarray(_VERTICES(model, motion_params(motion, model.num_expression, rows)))
+                for k, t in enumerate(rows[:len(batch)]):
+                    if motion["valid"][t]:
+                        people[k].append(Posed(person_id, vertices[k], motion["camera_scale"][t],
+                                               motion["camera_trans"][t]))
+            writer.write(*zip(batch, people))
             bar.update(len(batch))
-        bar.close()
     return Path(path)
 
 
@@ -61,29 +66,55 @@ def write_exports(out_dir: Path, model: smplx_jax.BodyModel, motion: dict, forma
 
 
 def write_keypoints(folder: Path, media: Media, chunk: Chunk, first: int) -> None:
-    """The chunk's detections as OpenPose JSON, one file per frame (``first``: the chunk's first frame's position
-    in the run), named after the image or the video's stem and frame number."""
-    for n, (frame, found) in enumerate(zip(chunk.frame_index, chunk.found)):
+    """The chunk's detections as OpenPose JSON, one file per frame listing every person with their
+    ``person_id`` (``first``: the chunk's first frame's position in the run), named after the image or the
+    video's stem and frame number."""
+    for n, frame in enumerate(chunk.frame_index):
         name = json_name(media.stems[first + n], None) if media.stems else json_name(media.stem, int(frame))
-        write_openpose_json(folder / name, chunk.keypoints_2d[n][None] if found else np.zeros((0, 67, 3)))
+        seen = [(i, t.keypoints_2d[n]) for i, t in chunk.people.items() if t.found[n]]
+        write_openpose_json(folder / name, np.asarray([k for _, k in seen]).reshape(-1, 67, 3),
+                            person_ids=[i for i, _ in seen])
 
 
-def write_outputs(config: RunConfig, out_dir: Path, model: smplx_jax.BodyModel, media: Media, motion: dict,
-                  chunks: list[Chunk], chrono: Chrono) -> list[Path]:
-    """What ``config`` asks for besides ``motion.npz``: FrankMocap's pickles, the overlay video, the exports."""
+def write_outputs(config: RunConfig, out_dir: Path, model: smplx_jax.BodyModel, media: Media,
+                  motions: dict[int, dict], main: int | None, tracks: dict[int, Track], chunks: list[Chunk],
+                  chrono: Chrono) -> list[Path]:
+    """What ``config`` asks for besides the motions: FrankMocap's pickles (every person of each frame), the
+    overlay video (everyone), the exports (the main person's in ``out_dir``, each person's in
+    ``out_dir/people/<id>``)."""
     written = []
     if config.frankmocap_pkl:
         with chrono("frankmocap"):
-            boxes = [np.concatenate([getattr(c, k) for c in chunks]) for k in ("body_box", "hand_boxes")]
             frames = np.concatenate([c.frame_index for c in chunks])
-            written += write_frankmocap_pkls(out_dir, model, motion, *boxes, _frame_images(media, out_dir, frames))
+            people = {i: (motions[i], tracks[i].body_box, tracks[i].hand_boxes) for i in motions}
+            written += write_frankmocap_pkls(out_dir, model, people, _frame_images(media, out_dir, frames))
+    if config.save_frames and not media.paths:
+        with chrono("frames"):
+            written += write_frames(out_dir, config, media)
     if config.overlay:
         with chrono("overlay"):
-            written.append(write_overlay(out_dir / "overlay.mp4", model, motion, config.source, config.start,
-                                         config.end, config.stride, progress=config.progress))
+            total = sum(len(c.frame_index) for c in chunks)
+            written.append(write_overlay(out_dir / "overlay.mp4", model, motions, config, media.size, total))
     if config.exports:
         with chrono("exports"):
-            written += write_exports(out_dir, model, motion, config.exports)
+            if main is not None:
+                written += write_exports(out_dir, model, motions[main], config.exports)
+            for person_id, motion in motions.items():
+                written += write_exports(out_dir / "people" / str(person_id), model, motion, config.exports)
+    return written
+
+
+def write_frames(out_dir: Path, config: RunConfig, media: Media) -> list[Path]:
+    """A video's (or webcam's) frames of the run as JPEG images where FrankMocap's ``--save_frame`` puts them and
+    its pickles name them (`_frame_images`)."""
+    _, frames = open_media(config.source, config.start, config.end, config.stride)
+    written = []
+    for index, image in frames:
+        path = _frame_images(media, out_dir, [index])[0]
+        ok, data = cv2.imencode(".jpg", image)
+        if not ok:
+            raise OSError(f"cannot encode frame image {path}")
+        written.append(atomic_write_bytes(path, data.tobytes()))
     return written
 
 
