@@ -133,8 +133,7 @@ def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
     from jaxmocap.detect import Detector
     from jaxmocap.frame_source import open_media
     from jaxmocap.motion import lens, read_motion
-    from jaxmocap.pipeline import (Bodies, RunConfig, fitted_bodies, initial_bodies, motion_arrays, observations,
-                                   run)
+    from jaxmocap.pipeline import Bodies, RunConfig, fitted_bodies, initial_bodies, motion_arrays, observe, run
     from jaxmocap.pipeline.observe import repaired
 
     run(RunConfig(video, end=end, overlay=False, progress=False), work)
@@ -142,7 +141,7 @@ def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
     model = smplx_jax.load_model(smplx_jax.default_model_path())
     media, frames = open_media(video, 0, end, 1)
     frames = [frame for _, frame in frames]
-    detected = observations(Detector(static_image_mode=False), frames, None)  # BlazePose's own, unrepaired
+    detected = observe(Detector(static_image_mode=False), frames)  # BlazePose's own, unrepaired
     blazepose = np.where(detected.found[:, None, None], detected.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], np.nan)
     obs = repaired(detected, media.fps)  # as `run` observes
     init = initial_bodies(model, obs)

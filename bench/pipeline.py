@@ -1,5 +1,6 @@
 """End-to-end speed of ``jaxmocap run`` on the bundled clip, with a per-stage breakdown: the embedded default
-path, and the FrankMocap path (regressors with random weights of the real architecture, copy-and-paste).
+path, the same on Pose2Sim's two-person take (both people tracked and fitted), and the FrankMocap path (regressors
+with random weights of the real architecture, copy-and-paste).
 
     python bench/pipeline.py [--out bench/results] [--quick]      (or: jaxmocap bench --only pipeline)
 
@@ -15,7 +16,9 @@ import platform
 import tempfile
 from pathlib import Path
 
-CLIP = Path(__file__).resolve().parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+ROOT = Path(__file__).resolve().parents[1]
+CLIP = ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+TWO_PEOPLE = ROOT / "tests" / "data" / "pose2sim_multi_cam01.mp4"
 
 
 def main():
@@ -33,21 +36,22 @@ def main():
     rows = []
     with tempfile.TemporaryDirectory() as weights:
         save(Path(weights), Regressors(HandRegressor(rngs=nnx.Rngs(0)), BodyRegressor(rngs=nnx.Rngs(1))), {})
-        for path, options in (("default", {}), ("regressors", dict(weights=weights, integration="copy-paste"))):
+        for path, clip, options in (("default", CLIP, {}), ("two people", TWO_PEOPLE, {}),
+                                    ("regressors", CLIP, dict(weights=weights, integration="copy-paste"))):
             for name in ("first run",) + (() if args.quick else ("steady",)):
                 with tempfile.TemporaryDirectory() as tmp:
-                    report = run(RunConfig(CLIP, exports=("bvh", "gltf"), progress=False, **options), tmp)
+                    report = run(RunConfig(clip, exports=("bvh", "gltf"), progress=False, **options), tmp)
                 seconds = dict(report.seconds)
                 total = sum(seconds.values())
-                rows.append(dict(run=f"{path}, {name}", frames=report.frames, seconds=total,
-                                 fps=report.frames / total, stages=seconds))
+                rows.append(dict(run=f"{path}, {name}", frames=report.frames, people=len(report.people),
+                                 seconds=total, fps=report.frames / total, stages=seconds))
 
     stages = list(dict.fromkeys(s for r in rows for s in r["stages"]))
-    print(f"\njaxmocap run, {CLIP.name} (1080x1920, {rows[0]['frames']} frames), {os.cpu_count()} CPUs, "
-          f"{platform.machine()}")
-    print(f"{'':<22}{'frames/s':>9}{'total s':>9}" + "".join(f"{s:>18}" for s in stages))
+    print(f"\njaxmocap run, {CLIP.name} and {TWO_PEOPLE.name} ({rows[0]['frames']} frames each), "
+          f"{os.cpu_count()} CPUs, {platform.machine()}")
+    print(f"{'':<24}{'people':>7}{'frames/s':>9}{'total s':>9}" + "".join(f"{s:>18}" for s in stages))
     for r in rows:
-        print(f"{r['run']:<22}{r['fps']:>9.1f}{r['seconds']:>9.1f}" + "".join(
+        print(f"{r['run']:<24}{r['people']:>7}{r['fps']:>9.1f}{r['seconds']:>9.1f}" + "".join(
             f"{r['stages'].get(s, 0.0) * 1000 / r['frames']:>15.1f} ms" for s in stages))
     print("(stage columns: milliseconds per frame)")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -25,8 +25,13 @@ def _print_report(report):
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items())
     print(f"{report.frames} frames ({report.valid} with a person) in {total:.1f} s "
           f"({report.frames / max(total, 1e-9):.1f} frames/s): {stages}")
+    folders = {}
     for path in report.written:
-        print(f"wrote {path}")
+        folders.setdefault(Path(path).parent, []).append(path)
+    for folder, paths in folders.items():
+        print(f"wrote {len(paths)} files in {folder}/" if len(paths) > 3 else "\n".join(f"wrote {p}" for p in paths))
+    if len(report.people) > 1:
+        print(f"{len(report.people)} people tracked: {', '.join(map(str, report.people))}")
 
 
 def _cmd_run(args):

@@ -272,3 +272,23 @@ def test_tracking_finds_the_hands_as_often_as_holistic_does():
                 palm = np.linalg.norm(hand[9, :2] - hand[0, :2])
                 assert np.linalg.norm(hand[0, :2] - person.body[wrist, :2]) < 2 * palm
     assert found >= 124, found
+
+
+def test_a_restored_tracker_detects_as_the_original():
+    """A detector restored from another's `state` (as a resumed run restores it) continues exactly as that one:
+    two people, hands, tracking."""
+    from jaxmocap.frame_source import open_media
+
+    _, frames = open_media(DATA / "pose2sim_multi_cam01.mp4", 40, 48, 1)
+    frames = [frame for _, frame in frames]
+    original = Detector(static_image_mode=False, max_people=3)
+    for frame in frames[:4]:
+        original(frame)
+    restored = Detector(static_image_mode=False, max_people=3)
+    restored.restore({k: v.copy() for k, v in original.state().items()})
+    for frame in frames[4:]:
+        a, b = original(frame), restored(frame)
+        assert len(a) == len(b) == 2
+        for p, q in zip(a, b):
+            np.testing.assert_array_equal(to_openpose([p]), to_openpose([q]))
+            np.testing.assert_array_equal(p.body_world, q.body_world)

@@ -11,9 +11,11 @@ from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models
 from .pose import PoseEstimator, PoseResult, landmark_box, rect_iou
+from .roi import Rect
 from .ssd import Detection, in_image, square_tiles
 
 SIDES = ("left", "right")
+_NO_HAND = HandResult(np.zeros((21, 3)), np.zeros((21, 3)), 0.0, 0.0, Rect(0, 0, 0, 0), Rect(0, 0, 0, 0))
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,32 @@ class Detector:
         """Forget the tracked people (start of a new video)."""
         self._tracks = []
         self._frame = 0
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The tracked people as arrays (``np.savez``-able); `restore` continues from them exactly as this
+        detector would (a resumed run detects as an uninterrupted one)."""
+        hands = [[t.hands.get(side) for side in SIDES] for t in self._tracks]
+        out = {"frame": np.asarray(self._frame), "hand_found": np.asarray(
+            [[h is not None for h in pair] for pair in hands], bool).reshape(-1, 2)}
+        for kind, results, empty in (("pose", [t.pose for t in self._tracks], None),
+                                     ("hand", [h for pair in hands for h in pair], _NO_HAND)):
+            for name in (PoseResult if kind == "pose" else HandResult)._fields:
+                values = [np.asarray(getattr(r or empty, name), np.float64) for r in results]  # all float64
+                out[f"{kind}_{name}"] = np.asarray(values) if values else np.zeros((0,))
+        return out
+
+    def restore(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from a `state`."""
+        def result(kind, cls, i):
+            fields = {name: state[f"{kind}_{name}"][i] for name in cls._fields}
+            return cls(**{name: Rect(*map(float, v)) if name.endswith("roi") else v if v.ndim else float(v)
+                          for name, v in fields.items()})
+
+        found = state["hand_found"]
+        self._tracks = [_Track(result("pose", PoseResult, k), {
+            side: result("hand", HandResult, 2 * k + j) if found[k, j] else None for j, side in enumerate(SIDES)})
+            for k in range(len(found))]
+        self._frame = int(state["frame"])
 
     # -- body -------------------------------------------------------------------------------------------------
     def _person_detections(self, image: np.ndarray) -> list[Detection]:

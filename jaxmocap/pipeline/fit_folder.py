@@ -102,7 +102,7 @@ def fit_keypoint_folder(keypoints_dir, out_dir, *, model_path=None, iterations: 
             bar.close()
     bodies = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
                     np.asarray(result.camera_trans), np.asarray(result.valid))
-    motion = motion_arrays(model, smoothed(bodies) if smooth else bodies, keypoints)
+    motion = motion_arrays(model, smoothed(model, bodies, keypoints) if smooth else bodies, keypoints)
     size = image_size if image_size else infer_image_size(keypoints)
     return write_motion(Path(out_dir) / "motion.npz", motion | {
         "fps": np.asarray(fps), "image_size": np.asarray(size), "model_sha256": np.asarray(file_sha256(model_path))})

@@ -4,8 +4,8 @@
 detector's 2D keypoints and 3D landmarks -> IK of body and hands from the landmarks -> the fit to the 2D keypoints
 through a pinhole camera. With FrankMocap's converted weights: body and hand regressors on the detector's boxes ->
 copy-and-paste -> optionally the same fit. Frames go in chunks; each finished chunk is stored, so an interrupted
-run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (the detector starts
-afresh at every chunk, in both cases). Then over the whole sequence: temporal smoothing -> ``motion.npz`` -> the
+run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (each chunk stores what
+the detector and the identities carry on to the next). Then over the whole sequence: temporal smoothing -> ``motion.npz`` -> the
 outputs.
 """
 
@@ -85,7 +85,8 @@ def run(config: RunConfig, out_dir) -> RunReport:
     with chrono("smooth"):
         tracks = whole_tracks(chunks, inputs.model)
         if config.smooth:
-            tracks = {i: dataclasses.replace(t, bodies=smoothed(t.bodies)) for i, t in tracks.items()}
+            tracks = {i: dataclasses.replace(t, bodies=smoothed(inputs.model, t.bodies, t.keypoints_2d, inputs.lens))
+                      for i, t in tracks.items()}
     with chrono("write"):
         meta = {"fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
                 "model_sha256": np.asarray(inputs.model_sha256)}
@@ -135,8 +136,8 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
                 store.save(index, chunk)
                 with chrono("keypoints"):
                     write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
-            elif tracker is not None:
-                tracker.restore(chunk.tracker)
+            else:
+                _restore(chunk.tracking, detector, tracker)
             yield chunk
             done += len(ids)
             bar.update(len(ids))
@@ -164,7 +165,20 @@ def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: 
                 bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, obs,
                                                       config.integration, config.iterations)
         tracks[person_id] = Track(obs.keypoints, obs.body_box, hand_boxes, obs.found, bodies)
-    return Chunk(ids, tracks, {} if tracker is None else tracker.state())
+    return Chunk(ids, tracks, _tracking(detector, tracker))
+
+
+def _tracking(detector: Detector, tracker: IdentityTracker | None) -> dict[str, np.ndarray]:
+    """What the detector and the identities carry from one chunk to the next, as arrays."""
+    identities = {} if tracker is None else {f"identities/{k}": v for k, v in tracker.state().items()}
+    return {f"detector/{k}": v for k, v in detector.state().items()} | identities
+
+
+def _restore(tracking: dict[str, np.ndarray], detector: Detector, tracker: IdentityTracker | None) -> None:
+    part = lambda prefix: {k.split("/", 1)[1]: v for k, v in tracking.items() if k.startswith(prefix)}  # noqa: E731
+    detector.restore(part("detector/"))
+    if tracker is not None:
+        tracker.restore(part("identities/"))
 
 
 def _batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[list]:

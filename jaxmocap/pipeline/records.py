@@ -57,15 +57,16 @@ class Track:
 
 @dataclass(frozen=True)
 class Chunk:
-    """One chunk of frames: each person's `Track` by identity, and the identity tracker's state after it."""
+    """One chunk of frames: each person's `Track` by identity, and what the detector and the identities carry on
+    to the next chunk (``tracking``)."""
 
     frame_index: np.ndarray  # (n,) frame numbers in the source
     people: dict[int, Track]
-    tracker: dict[str, np.ndarray]
+    tracking: dict[str, np.ndarray]
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Flat named arrays (the chunk file's keys: ``frame_index``, ``tracker/<key>``, ``<id>/<field>``)."""
-        arrays = {"frame_index": self.frame_index} | {f"tracker/{k}": v for k, v in self.tracker.items()}
+        """Flat named arrays (the chunk file's keys: ``frame_index``, ``tracking/<key>``, ``<id>/<field>``)."""
+        arrays = {"frame_index": self.frame_index} | {f"tracking/{k}": v for k, v in self.tracking.items()}
         for person_id, track in self.people.items():
             leaves = {f.name: getattr(track, f.name) for f in dataclasses.fields(track) if f.name != "bodies"}
             leaves |= {k: getattr(track.bodies, k) for k in ("camera_scale", "camera_trans", "valid")}
@@ -75,11 +76,11 @@ class Chunk:
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> "Chunk":
-        tracker = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith("tracker/")}
+        tracking = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith("tracking/")}
         people = {}
         for person_id in sorted({int(k.split("/")[0]) for k in arrays if k.split("/")[0].isdigit()}):
             a = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith(f"{person_id}/")}
             params = smplx_jax.SMPLXParams(**{f.name: a[f.name] for f in dataclasses.fields(smplx_jax.SMPLXParams)})
             bodies = Bodies(params, a["camera_scale"], a["camera_trans"], a["valid"])
             people[person_id] = Track(a["keypoints_2d"], a["body_box"], a["hand_boxes"], a["found"], bodies)
-        return cls(arrays["frame_index"], people, tracker)
+        return cls(arrays["frame_index"], people, tracking)

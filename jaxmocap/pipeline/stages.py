@@ -15,6 +15,7 @@ from jaxmocap.detect import Detector
 from jaxmocap.integrate import FitConfig, body_from_blazepose, fit, fitted_motion, hand_into_body
 from jaxmocap.integrate.camera import default_focal_length
 from jaxmocap.integrate.fitting import params_from_full_pose
+from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.integrate.smooth import smooth_camera, smooth_params
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.pipeline.observe import Observations, observe_people, repaired
@@ -25,11 +26,10 @@ Lens = tuple[float, np.ndarray] | tuple[None, None]  # a pinhole camera's (focal
 
 def observations(detector: Detector, tracker: IdentityTracker | None, frames: list[np.ndarray], fps: float | None,
                  given_keypoints: np.ndarray | None = None) -> dict[int, Observations]:
-    """Each person in the frames by identity (`observe_people`; the detector starts afresh, ``tracker`` carries
-    the identities on); in a video (``fps`` given) with left and right put back where the detector exchanged them
-    and hands lost for a moment interpolated; ``given_keypoints`` (N, 67, 3) replace the 2D keypoints of the one
-    person tracked as the fit's targets."""
-    detector.reset()
+    """Each person in the frames by identity (`observe_people`; the detector and ``tracker`` carry on from the
+    frames before); in a video (``fps`` given) with left and right put back where the detector exchanged them and
+    hands lost for a moment interpolated; ``given_keypoints`` (N, 67, 3) replace the 2D keypoints of the one person
+    tracked as the fit's targets."""
     people = observe_people(detector, tracker, frames)
     if fps is not None:
         people = {person_id: repaired(obs, fps) for person_id, obs in people.items()}
@@ -71,17 +71,28 @@ def fitted_bodies(model: smplx_jax.BodyModel, obs: Observations, init: smplx_jax
 
 
 _SMOOTH = jax.jit(smooth_params)
+SMOOTHING_SLACK = (3.0, 20.0)  # (times, pixels): how much farther a smoothed body may reproject than its fit
 
 
-def smoothed(bodies: Bodies) -> Bodies:
+def smoothed(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens = (None, None)
+             ) -> Bodies:
     """Rotations (as quaternions), shape, translation and camera filtered over time across valid frames
-    (`jaxmocap.integrate.smooth`); invalid frames are left as they are."""
+    (`jaxmocap.integrate.smooth`); invalid frames are left as they are. Smoothing must not take a body off its
+    person: where neighbouring fits disagree (a body seen from behind, turned one way in one frame and the other in
+    the next: each matches the image, their average matches neither) and the smoothed body reprojects more than
+    `SMOOTHING_SLACK` farther from the 2D keypoints than the frame's own fit, the frame keeps its fit."""
     if not bodies.valid.any():
         return bodies
     valid = jnp.asarray(bodies.valid)
     scale, trans = smooth_camera(jnp.asarray(bodies.camera_scale), jnp.asarray(bodies.camera_trans), valid)
-    return Bodies(jax.tree.map(np.asarray, _SMOOTH(bodies.params, valid)), np.asarray(scale), np.asarray(trans),
-                  bodies.valid)
+    smooth = Bodies(jax.tree.map(np.asarray, _SMOOTH(bodies.params, valid)), np.asarray(scale), np.asarray(trans),
+                    bodies.valid)
+    fitted, filtered = (reprojection_errors(model, b.params, b.camera_scale, b.camera_trans, keypoints_2d, *lens)
+                        for b in (bodies, smooth))
+    ratio, pixels = SMOOTHING_SLACK
+    keep = filtered > np.maximum(ratio * fitted, fitted + pixels)
+    return jax.tree.map(lambda own, new: np.where(keep.reshape((-1,) + (1,) * (own.ndim - 1)), own, new), bodies,
+                        smooth)
 
 
 def motion_arrays(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens = (None, None)
