@@ -37,7 +37,7 @@ def run(source, out, **options):
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
     report = run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
-                              progress=False, frankmocap_pkl=True)
+                 progress=False, frankmocap_pkl=True, save_frames=True)
     return out, report
 
 
@@ -106,6 +106,7 @@ def test_frankmocap_pickles_reproduce_the_projection(result):
     for t, d in enumerate(data):
         assert list(d) == PKL_KEYS and (d["demo_type"], d["smpl_type"], d["save_mesh"]) == ("frank", "smplx", False)
         assert d["image_path"] == str((out / "frames" / f"{20 + t:05d}.jpg").absolute())
+        assert cv2.imread(d["image_path"]).shape == (1920, 1080, 3)  # --save-frames wrote it
         assert len(d["pred_output_list"]) == len(d["body_bbox_list"]) == len(d["hand_bbox_list"]) == 1
     assert_frankmocap_projection(data, 0, motion)
     for f in files:
