@@ -37,7 +37,8 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
     init = problem.init
     b = init.betas.shape[0]
     body = smplx.create(str(model_dir), model_type="smplx", use_pca=False, flat_hand_mean=True, batch_size=b)
-    t = lambda a: torch.tensor(np.asarray(a), dtype=torch.float32).reshape(b, -1)  # noqa: E731
+    def t(a):
+        return torch.tensor(np.asarray(a), dtype=torch.float32).reshape(b, -1)
     start = dict(global_orient=t(init.global_orient), body_pose=t(init.body_pose),
                  left_hand_pose=t(init.left_hand_pose), right_hand_pose=t(init.right_hand_pose), betas=t(init.betas))
     var = {k: v.clone().requires_grad_(True) for k, v in start.items()}
@@ -89,7 +90,8 @@ def torch_fit(model_dir, problem, cam0, config, method, iterations, threads):
     seconds = time.perf_counter() - begin
     from smplx_jax import SMPLXParams
 
-    j = lambda k, shape: jnp.asarray(var[k].detach().numpy().reshape(shape))  # noqa: E731
+    def j(k, shape):
+        return jnp.asarray(var[k].detach().numpy().reshape(shape))
     params = SMPLXParams(j("global_orient", (b, 3)), j("body_pose", (b, 21, 3)), j("left_hand_pose", (b, 15, 3)),
                          j("right_hand_pose", (b, 15, 3)), jnp.zeros((b, 3)), jnp.zeros((b, 3)), jnp.zeros((b, 3)),
                          j("betas", (b, 10)), jnp.zeros((b, 10)), jnp.zeros((b, 3)))
@@ -130,9 +132,14 @@ def main():
         problem = synthetic.make_problem(model, frames, seed=frames)
         cam0 = np.asarray(start_camera(fitting.full_pose_of(problem.init), problem.init.betas,
                                        jnp.asarray(problem.keypoints)))
-        err = lambda p, s, t: float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))  # noqa: E731
-        run = lambda: jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0],  # noqa
-                                                        cam0[:, 1:], iterations=iterations))
+
+        def err(p, s, t):
+            return float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))
+
+        def run():
+            return jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0], cam0[:, 1:],
+                                                     iterations=iterations))
+
         begin = time.perf_counter()
         run()
         first_call = time.perf_counter() - begin

@@ -110,7 +110,8 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
     skin_weights = np.take_along_axis(weights, skin_joints, axis=1)
 
     hand_components = np.stack([arrays["hands_componentsl"], arrays["hands_componentsr"]])
-    f = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
+    def f(a):
+        return jnp.asarray(a, dtype=dtype)
     return BodyModel(
         template_cm=f(v_template.T),
         shapedirs_cm=f(_coordinate_major(shapedirs)),

@@ -30,7 +30,8 @@ class SMPLXParams:
     @classmethod
     def zeros(cls, num_betas: int = 10, num_expression: int = 10, dtype=jnp.float32) -> "SMPLXParams":
         """The rest pose with mean shape (flat hands)."""
-        z = lambda *shape: jnp.zeros(shape, dtype)  # noqa: E731
+        def z(*shape):
+            return jnp.zeros(shape, dtype)
         return cls(z(3), z(21, 3), z(15, 3), z(15, 3), z(3), z(3), z(3), z(num_betas), z(num_expression), z(3))
 
     def replace(self, **changes) -> "SMPLXParams":

@@ -16,7 +16,10 @@ TOL = 1e-5
 NUM_PCA = 12
 FORWARD = jax.jit(jax.vmap(smplx_jax.forward, in_axes=(None, 0)))
 JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
-_vmap_hand = lambda fn: jax.vmap(fn, in_axes=(None, 0, None))  # noqa: E731
+
+
+def _vmap_hand(fn):
+    return jax.vmap(fn, in_axes=(None, 0, None))
 
 
 def _torch_model(model_dir, **options):

@@ -104,7 +104,8 @@ def test_frankmocap_pickles_reproduce_the_projection(result):
         assert all(person[k].dtype == np.float32 for k in PERSON_SHAPES if k != "bbox_top_left")
         _, ratio, top_left = ref.body_crop(np.zeros((1080, 1920, 3), np.uint8), d["body_bbox_list"][0])
         assert person["bbox_scale_ratio"] == pytest.approx(ratio) and np.array_equal(person["bbox_top_left"], top_left)
-    t = lambda k: torch.from_numpy(np.stack([p[k][0] for p in people]))  # noqa: E731
+    def t(k):
+        return torch.from_numpy(np.stack([p[k][0] for p in people]))
     layer = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
                          flat_hand_mean=False, num_betas=10, batch_size=FRAMES)  # FrankMocap's SMPLX layer
     with torch.no_grad():
@@ -141,7 +142,8 @@ def smplx_joints(motion):
     frames = len(motion["valid"])
     body = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
                         flat_hand_mean=True, num_betas=motion["betas"].shape[1], batch_size=frames)
-    t = lambda k: torch.from_numpy(np.ascontiguousarray(motion[k], np.float32)).reshape(frames, -1)  # noqa: E731
+    def t(k):
+        return torch.from_numpy(np.ascontiguousarray(motion[k], np.float32)).reshape(frames, -1)
     with torch.no_grad():
         return body(global_orient=t("global_orient"), body_pose=t("body_pose"), left_hand_pose=t("left_hand_pose"),
                     right_hand_pose=t("right_hand_pose"), jaw_pose=t("jaw_pose"), betas=t("betas"),
@@ -271,7 +273,8 @@ def test_given_keypoints_replace_the_detectors(result, tmp_path):
     seen = original["keypoints_2d"][..., 2] > 0
     np.testing.assert_allclose(shifted["keypoints_2d"][..., 0][seen], original["keypoints_2d"][..., 0][seen] + 30,
                                atol=1e-2)
-    origin_x = lambda m: m["focal_length"] * m["transl"][:, 0] / m["transl"][:, 2]  # noqa: E731  (the body origin's)
+    def origin_x(m):  # the body origin's
+        return m["focal_length"] * m["transl"][:, 0] / m["transl"][:, 2]
     assert np.median(origin_x(shifted) - origin_x(original)) > 20
 
 

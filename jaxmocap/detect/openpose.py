@@ -46,16 +46,19 @@ def hand21(hand: np.ndarray | None, confidence: float) -> np.ndarray:
     return out
 
 
+def _flat(a: np.ndarray) -> list[float]:
+    return [round(float(v), 3) for v in a.reshape(-1)]
+
+
 def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray) -> Path:
     """Write (P, 67, 3) keypoints as one OpenPose 1.3 JSON file, atomically. Returns the path."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     if keypoints.ndim != 3 or keypoints.shape[1:] != (NUM_KEYPOINTS, 3):
         raise ValueError(f"keypoints must have shape (num_people, 67, 3), got {keypoints.shape}")
-    flat = lambda a: [round(float(v), 3) for v in a.reshape(-1)]  # noqa: E731
     people = [{
-        "pose_keypoints_2d": flat(p[BODY_SLICE]),
-        "hand_left_keypoints_2d": flat(p[LEFT_HAND_SLICE]),
-        "hand_right_keypoints_2d": flat(p[RIGHT_HAND_SLICE]),
+        "pose_keypoints_2d": _flat(p[BODY_SLICE]),
+        "hand_left_keypoints_2d": _flat(p[LEFT_HAND_SLICE]),
+        "hand_right_keypoints_2d": _flat(p[RIGHT_HAND_SLICE]),
         "face_keypoints_2d": [],
     } for p in keypoints]
     path = Path(path)

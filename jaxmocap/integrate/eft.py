@@ -146,7 +146,8 @@ def _error_px(model, output: BodyOutput, target, conf):
 def _one(graphdef, trainable, frozen, model, x, target, conf, rate, config: EFTConfig):
     """``config.steps`` Adam steps on one frame's copy of ``trainable``; returns the final prediction."""
     optimizer = optax.adam(rate)
-    first = lambda out: jax.tree.map(lambda a: a[0], out)  # noqa: E731
+    def first(out):
+        return jax.tree.map(lambda a: a[0], out)
 
     def predict(weights):
         return first(_predict(nnx.merge(graphdef, weights, frozen), x[None], config.trainable))

@@ -209,7 +209,8 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
         stop = min(t, start + BUCKETS[-1])
         n = stop - start
         size = bucket_size(n)
-        pad = lambda a: np.concatenate([a[start:stop], np.repeat(a[start:start + 1], size - n, 0)])  # noqa: E731
+        def pad(a):
+            return np.concatenate([a[start:stop], np.repeat(a[start:start + 1], size - n, 0)])
         kp = pad(keypoints)
         kp[n:] = 0.0  # padding frames have no keypoints
         frames = shard_frames((kp, pad(pose), pad(betas), None if camera is None else pad(camera)), size)

@@ -76,7 +76,8 @@ def body_params(model: smplx_jax.BodyModel, rotmats: Float[Array, "24 3 3"], bet
     """One body's SMPL rotations -> SMPL-X parameters: global orientation and body joints 1..21 (SMPL's hands 22,
     23 dropped), the model's mean hands, zero face and translation."""
     rotvecs = rotmat_to_rotvec(rotmats)
-    zeros = lambda n: jnp.zeros(n, rotvecs.dtype)  # noqa: E731
+    def zeros(n):
+        return jnp.zeros(n, rotvecs.dtype)
     return smplx_jax.SMPLXParams(
         global_orient=rotvecs[0], body_pose=rotvecs[1:22], left_hand_pose=model.hand_mean[0].reshape(15, 3),
         right_hand_pose=model.hand_mean[1].reshape(15, 3), jaw_pose=zeros(3), leye_pose=zeros(3),
