@@ -3,13 +3,13 @@
 import dataclasses
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
 from smplx_jax import constants
 from smplx_jax.model_file import read_model_file
+from smplx_jax.pytree import pytree_dataclass
 
 SHAPE_SPACE_DIM = 300  # shape columns of a 400-column SMPL-X file; expression follows them
 
@@ -18,7 +18,7 @@ def _static(**kwargs):
     return dataclasses.field(metadata=dict(static=True), **kwargs)
 
 
-@jax.tree_util.register_dataclass
+@pytree_dataclass
 @dataclasses.dataclass(frozen=True)
 class BodyModel:
     """One SMPL-X model. ``S = num_betas + num_expression`` shape components, ``P = 9 * 54`` pose features.

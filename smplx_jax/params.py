@@ -3,15 +3,16 @@
 import dataclasses
 from typing import Literal
 
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
+
+from smplx_jax.pytree import pytree_dataclass
 
 Side = Literal["left", "right"]
 _SIDE_INDEX = {"left": 0, "right": 1}
 
 
-@jax.tree_util.register_dataclass
+@pytree_dataclass
 @dataclasses.dataclass(frozen=True)
 class SMPLXParams:
     """One body, axis-angle. Hand poses are absolute (``flat_hand_mean=True`` in the ``smplx`` package)."""

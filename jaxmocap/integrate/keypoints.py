@@ -29,6 +29,7 @@ from jaxtyping import Array, Float, Int
 import smplx_jax
 from jaxmocap.integrate import mat3
 from smplx_jax import BodyModel, SMPLXParams
+from smplx_jax.pytree import pytree_dataclass
 
 NUM_VERTEX_JOINTS = 21
 
@@ -37,7 +38,7 @@ def _static(**kwargs):
     return dataclasses.field(metadata=dict(static=True), **kwargs)
 
 
-@jax.tree_util.register_dataclass
+@pytree_dataclass
 @dataclasses.dataclass(frozen=True)
 class KeypointModel:
     """A body model reduced to what a fit to ``K`` keypoints needs (see `keypoint_model`). ``I`` is the most
