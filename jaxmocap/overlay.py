@@ -91,7 +91,7 @@ class OverlayWriter:
                 left = cv2.resize(left, self.panel)
             lo, hi = vertices.min(axis=0), vertices.max(axis=0)
             if self.pixels_per_metre is None:
-                self.pixels_per_metre = 0.75 * self.panel[1] / (hi - lo).max()
+                self.pixels_per_metre = float(0.75 * self.panel[1] / (hi - lo).max())
             right = side_view(vertices, faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up)
         return np.concatenate([left, right], axis=1)
 

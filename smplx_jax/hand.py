@@ -32,8 +32,8 @@ class HandModel:
     vertex_ids: Int[Array, "N"]  # ids in the body model
     faces: Int[Array, "F 3"]  # into the N hand vertices
     template_cm: Float[Array, "3 N"]  # coordinate-major, as in `BodyModel`
-    shapedirs_cm: Float[Array, "B 3N"]
-    posedirs_cm: Float[Array, "135 3N"]
+    shapedirs_cm: Float[Array, "B 3*N"]
+    posedirs_cm: Float[Array, "135 3*N"]
     weights_t: Float[Array, "16 N"]
     joint_template: Float[Array, "16 3"]
     joint_shapedirs: Float[Array, "16 3 B"]

@@ -32,8 +32,8 @@ class BodyModel:
     """
 
     template_cm: Float[Array, "3 V"]
-    shapedirs_cm: Float[Array, "S 3V"]  # shape components (S,) @ shapedirs_cm -> (3V,)
-    posedirs_cm: Float[Array, "P 3V"]  # pose feature (P,) @ posedirs_cm -> (3V,)
+    shapedirs_cm: Float[Array, "S 3*V"]  # shape components (S,) @ shapedirs_cm -> (3V,)
+    posedirs_cm: Float[Array, "P 3*V"]  # pose feature (P,) @ posedirs_cm -> (3V,)
     weights_t: Float[Array, "J V"]
     skin_joints: Int[Array, "I V"]  # each vertex's joints by decreasing weight
     skin_weights: Float[Array, "I V"]  # their weights; all others are zero
@@ -44,8 +44,8 @@ class BodyModel:
     hand_components: Float[Array, "2 C 45"]  # left, right; rows are PCA components
     sparse_ids: Int[Array, "K"]  # vertex ids of the sparse vertices
     sparse_template_cm: Float[Array, "3 K"]
-    sparse_shapedirs_cm: Float[Array, "S 3K"]
-    sparse_posedirs_cm: Float[Array, "P 3K"]
+    sparse_shapedirs_cm: Float[Array, "S 3*K"]
+    sparse_posedirs_cm: Float[Array, "P 3*K"]
     sparse_skin_joints: Int[Array, "I K"]
     sparse_skin_weights: Float[Array, "I K"]
     vertex_joint_slots: Int[Array, "21"]  # vertex joints as indices into the sparse vertices

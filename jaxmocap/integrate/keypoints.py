@@ -196,7 +196,7 @@ class Linearization(NamedTuple):
     x: Float[Array, "3 K"]  # the keypoints
     p: Float[Array, "3 55"]  # joint positions
     a: Float[Array, "3 3 55"]  # world increment per unit dtheta: G_parent J_l(theta)
-    jb: Float[Array, "B 3K"]  # dx/dbetas, row b holds all x then all y then all z
+    jb: Float[Array, "B 3*K"]  # dx/dbetas, row b holds all x then all y then all z
     offsets: Float[Array, "3 P"]  # W_i (y_i - x_v) of the blended pairs (the blended skinning's correction)
     jl: Float[Array, "3 3 55"]  # J_l(theta), the local increment per unit dtheta (pose blend shapes)
     rel: Float[Array, "3 3 55"]

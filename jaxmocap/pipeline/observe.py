@@ -118,5 +118,5 @@ def repair_side_swaps(obs: Observations, ratio: float = 0.5) -> Observations:
             same = distance(left, left) + distance(right, right)
             swapped = distance(left, right) + distance(right, left)
             if swapped < ratio * same and same > 0.2 * torso:
-                _swap_sides(obs, t, group)
+                _swap_sides(obs, int(t), group)
     return obs

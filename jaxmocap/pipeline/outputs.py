@@ -35,7 +35,7 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motion: dict, source, 
             ids = np.arange(done, done + len(batch))
             padded = np.concatenate([ids, np.full(_BATCH - len(ids), ids[-1])])  # one compiled batch size
             vertices = np.asarray(_VERTICES(model, motion_params(motion, model.num_expression, padded)))
-            writer.write(*[(frame, vertices[k], faces, motion["camera_scale"][i], motion["camera_trans"][i])
+            writer.write(*[(frame, vertices[k], faces, float(motion["camera_scale"][i]), motion["camera_trans"][i])
                            if valid[i] else (frame,) for k, (i, frame) in enumerate(zip(ids, batch))])
             done += len(batch)
             bar.update(len(batch))

@@ -5,7 +5,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 import smplx_jax
 from jaxmocap.regressors.body import BodyOutput
@@ -19,7 +19,7 @@ _NEGATED[1] = True
 _NEGATED[POSE] = np.tile([False, True, True], 16)
 
 
-def mirror_hand_params(raw: Float[Array, "N 61"]) -> Float[Array, "N 61"]:
+def mirror_hand_params(raw: Float[ArrayLike, "N 61"]) -> Float[Array, "N 61"]:
     """Left <-> right for a left-right flipped crop: negate camera tx and the y, z of every axis-angle (wrist
     included). Its own inverse."""
     return jnp.where(_NEGATED, -raw, raw)
