@@ -52,13 +52,19 @@ def _torch_objective(model_dir, problem, cam0, config):
     init = problem.init
     b = init.betas.shape[0]
     body = smplx.create(str(model_dir), model_type="smplx", use_pca=False, flat_hand_mean=True, batch_size=b)
-    t = lambda a: torch.tensor(np.asarray(a), dtype=torch.float32).reshape(b, -1)  # noqa: E731
+
+    def t(a):
+        return torch.tensor(np.asarray(a), dtype=torch.float32).reshape(b, -1)
+
     start = dict(global_orient=t(init.global_orient), body_pose=t(init.body_pose),
                  left_hand_pose=t(init.left_hand_pose), right_hand_pose=t(init.right_hand_pose), betas=t(init.betas))
     var = {k: v.clone().requires_grad_(True) for k, v in start.items()}
     s0, t0 = torch.tensor(np.asarray(cam0[:, 0])), torch.tensor(np.asarray(cam0[:, 1:]))
     log_s, d_t = torch.zeros(b, requires_grad=True), torch.zeros(b, 2, requires_grad=True)
-    camera = lambda: (s0 * torch.exp(log_s), t0 + s0[:, None] * d_t)  # noqa: E731
+
+    def camera():
+        return s0 * torch.exp(log_s), t0 + s0[:, None] * d_t
+
     kp = torch.tensor(problem.keypoints)
     conf = kp[..., 2]
     index = list(constants.OPENPOSE67_FROM_SMPLX)
@@ -151,7 +157,10 @@ def main():
         problem = synthetic.make_problem(model, frames, seed=frames)
         cam0 = np.asarray(start_camera(fitting.full_pose_of(problem.init), problem.init.betas,
                                        jnp.asarray(problem.keypoints)))
-        err = lambda p, s, t: float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))  # noqa: E731
+
+        def err(p, s, t, problem=problem):
+            return float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))
+
         row = _jax_row(model, problem, cam0, iterations, 3 if args.quick else 5, err)
         if not (args.quick and frames > 256):
             for method in ("lbfgs", "adam"):
@@ -177,8 +186,10 @@ def _jax_row(model, problem, cam0, iterations: int, repeats: int, err) -> dict:
     the best of ``repeats``, with the start's and the fit's reprojection errors ``err(params, scale, trans)``."""
     from jaxmocap.integrate import fitting
 
-    run = lambda: jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0],  # noqa
-                                                    cam0[:, 1:], iterations=iterations))
+    def run():
+        return jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0], cam0[:, 1:],
+                                                 iterations=iterations))
+
     begin = time.perf_counter()
     run()
     first_call = time.perf_counter() - begin

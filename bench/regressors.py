@@ -46,9 +46,9 @@ def _time(fns: dict, min_seconds: float, min_rounds: int) -> dict:
 def _networks(tmp: Path):
     """Random reference networks in PyTorch, saved as FrankMocap's files and imported."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import frankmocap_reference as ref
     import torch
 
+    import frankmocap_reference as ref
     from jaxmocap.regressors import convert_frankmocap
 
     rng = np.random.default_rng(0)

@@ -88,7 +88,8 @@ def read_motion(path) -> dict[str, np.ndarray]:
 def motion_params(motion: dict, num_expression: int = 10, frames=slice(None)) -> smplx_jax.SMPLXParams:
     """The motion's bodies (``frames`` of them) as batched `smplx_jax.SMPLXParams`; eyes at rest, no expression
     (motion.npz keeps neither)."""
-    f = lambda k: np.asarray(motion[k][frames], np.float32)  # noqa: E731
+    def f(k):
+        return np.asarray(motion[k][frames], np.float32)
     t = len(f("valid"))
     zeros = np.zeros((t, 3), np.float32)
     return smplx_jax.SMPLXParams(f("global_orient"), f("body_pose"), f("left_hand_pose"), f("right_hand_pose"),

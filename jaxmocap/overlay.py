@@ -146,7 +146,7 @@ class OverlayWriter:
         everyone = np.concatenate([p.vertices for p in people])
         lo, hi = everyone.min(axis=0), everyone.max(axis=0)
         if self.pixels_per_metre is None:
-            self.pixels_per_metre = 0.75 * self.panel[1] / (hi - lo).max()
+            self.pixels_per_metre = float(0.75 * self.panel[1] / (hi - lo).max())
         right = side_view(list(people), self.faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up)
         return np.concatenate([left, right], axis=1)
 

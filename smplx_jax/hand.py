@@ -8,7 +8,6 @@ rigidly. Pose blend shapes keep the finger joints' columns.
 import dataclasses
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
@@ -17,6 +16,7 @@ from smplx_jax import constants
 from smplx_jax.forward import _posed_points, _skin, _skinning_transforms, kinematic_chain
 from smplx_jax.model import BodyModel
 from smplx_jax.params import Side
+from smplx_jax.pytree import pytree_dataclass
 from smplx_jax.rotations import rotvec_to_rotmat
 
 # The 21 hand joints in OpenPose order, as indices into [wrist, 15 finger joints (SMPL-X order), 5 tips
@@ -24,7 +24,7 @@ from smplx_jax.rotations import rotvec_to_rotmat
 _OPENPOSE_ORDER = (0, 13, 14, 15, 16, 1, 2, 3, 17, 4, 5, 6, 18, 10, 11, 12, 19, 7, 8, 9, 20)
 
 
-@jax.tree_util.register_dataclass
+@pytree_dataclass
 @dataclasses.dataclass(frozen=True)
 class HandModel:
     """One hand. ``N`` vertices; joint 0 is the wrist, 1..15 the finger joints in SMPL-X order."""
@@ -32,8 +32,8 @@ class HandModel:
     vertex_ids: Int[Array, "N"]  # ids in the body model
     faces: Int[Array, "F 3"]  # into the N hand vertices
     template_cm: Float[Array, "3 N"]  # coordinate-major, as in `BodyModel`
-    shapedirs_cm: Float[Array, "B 3N"]
-    posedirs_cm: Float[Array, "135 3N"]
+    shapedirs_cm: Float[Array, "B 3*N"]
+    posedirs_cm: Float[Array, "135 3*N"]
     weights_t: Float[Array, "16 N"]
     joint_template: Float[Array, "16 3"]
     joint_shapedirs: Float[Array, "16 3 B"]

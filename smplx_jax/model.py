@@ -3,13 +3,13 @@
 import dataclasses
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
 from smplx_jax import constants
 from smplx_jax.model_file import read_model_file
+from smplx_jax.pytree import pytree_dataclass
 
 SHAPE_SPACE_DIM = 300  # shape columns of a 400-column SMPL-X file; expression follows them
 
@@ -18,7 +18,7 @@ def _static(**kwargs):
     return dataclasses.field(metadata=dict(static=True), **kwargs)
 
 
-@jax.tree_util.register_dataclass
+@pytree_dataclass
 @dataclasses.dataclass(frozen=True)
 class BodyModel:
     """One SMPL-X model. ``S = num_betas + num_expression`` shape components, ``P = 9 * 54`` pose features.
@@ -32,8 +32,8 @@ class BodyModel:
     """
 
     template_cm: Float[Array, "3 V"]
-    shapedirs_cm: Float[Array, "S 3V"]  # shape components (S,) @ shapedirs_cm -> (3V,)
-    posedirs_cm: Float[Array, "P 3V"]  # pose feature (P,) @ posedirs_cm -> (3V,)
+    shapedirs_cm: Float[Array, "S 3*V"]  # shape components (S,) @ shapedirs_cm -> (3V,)
+    posedirs_cm: Float[Array, "P 3*V"]  # pose feature (P,) @ posedirs_cm -> (3V,)
     weights_t: Float[Array, "J V"]
     skin_joints: Int[Array, "I V"]  # each vertex's joints by decreasing weight
     skin_weights: Float[Array, "I V"]  # their weights; all others are zero
@@ -44,8 +44,8 @@ class BodyModel:
     hand_components: Float[Array, "2 C 45"]  # left, right; rows are PCA components
     sparse_ids: Int[Array, "K"]  # vertex ids of the sparse vertices
     sparse_template_cm: Float[Array, "3 K"]
-    sparse_shapedirs_cm: Float[Array, "S 3K"]
-    sparse_posedirs_cm: Float[Array, "P 3K"]
+    sparse_shapedirs_cm: Float[Array, "S 3*K"]
+    sparse_posedirs_cm: Float[Array, "P 3*K"]
     sparse_skin_joints: Int[Array, "I K"]
     sparse_skin_weights: Float[Array, "I K"]
     vertex_joint_slots: Int[Array, "21"]  # vertex joints as indices into the sparse vertices
@@ -110,7 +110,8 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
     skin_weights = np.take_along_axis(weights, skin_joints, axis=1)
 
     hand_components = np.stack([arrays["hands_componentsl"], arrays["hands_componentsr"]])
-    f = lambda a: jnp.asarray(a, dtype=dtype)  # noqa: E731
+    def f(a):
+        return jnp.asarray(a, dtype=dtype)
     return BodyModel(
         template_cm=f(v_template.T),
         shapedirs_cm=f(_coordinate_major(shapedirs)),

@@ -3,34 +3,38 @@
 import dataclasses
 from typing import Literal
 
-import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
+
+from smplx_jax.pytree import pytree_dataclass
 
 Side = Literal["left", "right"]
 _SIDE_INDEX = {"left": 0, "right": 1}
 
 
-@jax.tree_util.register_dataclass
+@pytree_dataclass
 @dataclasses.dataclass(frozen=True)
 class SMPLXParams:
-    """One body, axis-angle. Hand poses are absolute (``flat_hand_mean=True`` in the ``smplx`` package)."""
+    """One body, axis-angle, or a batch of bodies (the same leading axes on every field: `forward` takes one, so
+    batches go through ``jax.vmap``), as JAX or numpy arrays. Hand poses are absolute (``flat_hand_mean=True`` in
+    the ``smplx`` package)."""
 
-    global_orient: Float[Array, "3"]
-    body_pose: Float[Array, "21 3"]
-    left_hand_pose: Float[Array, "15 3"]
-    right_hand_pose: Float[Array, "15 3"]
-    jaw_pose: Float[Array, "3"]
-    leye_pose: Float[Array, "3"]
-    reye_pose: Float[Array, "3"]
-    betas: Float[Array, "num_betas"]
-    expression: Float[Array, "num_expression"]
-    transl: Float[Array, "3"]
+    global_orient: Float[ArrayLike, "*batch 3"]
+    body_pose: Float[ArrayLike, "*batch 21 3"]
+    left_hand_pose: Float[ArrayLike, "*batch 15 3"]
+    right_hand_pose: Float[ArrayLike, "*batch 15 3"]
+    jaw_pose: Float[ArrayLike, "*batch 3"]
+    leye_pose: Float[ArrayLike, "*batch 3"]
+    reye_pose: Float[ArrayLike, "*batch 3"]
+    betas: Float[ArrayLike, "*batch num_betas"]
+    expression: Float[ArrayLike, "*batch num_expression"]
+    transl: Float[ArrayLike, "*batch 3"]
 
     @classmethod
     def zeros(cls, num_betas: int = 10, num_expression: int = 10, dtype=jnp.float32) -> "SMPLXParams":
         """The rest pose with mean shape (flat hands)."""
-        z = lambda *shape: jnp.zeros(shape, dtype)  # noqa: E731
+        def z(*shape):
+            return jnp.zeros(shape, dtype)
         return cls(z(3), z(21, 3), z(15, 3), z(15, 3), z(3), z(3), z(3), z(num_betas), z(num_expression), z(3))
 
     def replace(self, **changes) -> "SMPLXParams":
@@ -47,12 +51,14 @@ class SMPLXParams:
         return jnp.concatenate([self.betas, self.expression])
 
 
-def hand_pose_from_relative(model, relative_pose: Float[Array, "15 3"], side: Side) -> Float[Array, "15 3"]:
+def hand_pose_from_relative(model, relative_pose: Float[ArrayLike, "*batch 15 3"], side: Side
+                            ) -> Float[Array, "*batch 15 3"]:
     """Absolute hand pose from one relative to the model's mean hand (``flat_hand_mean=False``)."""
     return relative_pose + model.hand_mean[_SIDE_INDEX[side]].reshape(15, 3)
 
 
-def hand_pose_to_relative(model, hand_pose: Float[Array, "15 3"], side: Side) -> Float[Array, "15 3"]:
+def hand_pose_to_relative(model, hand_pose: Float[ArrayLike, "*batch 15 3"], side: Side
+                          ) -> Float[Array, "*batch 15 3"]:
     """The hand pose relative to the model's mean hand."""
     return hand_pose - model.hand_mean[_SIDE_INDEX[side]].reshape(15, 3)
 

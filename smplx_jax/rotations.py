@@ -6,7 +6,7 @@ adding an epsilon to the input.
 """
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 _SMALL = 1e-6  # squared angle (or squared sine) below which the series are exact to float64 rounding
 
@@ -24,7 +24,7 @@ def skew_polynomial(rotvec: Float[Array, "... 3"], a: Float[Array, "..."], b: Fl
     return jnp.stack(entries, axis=-1).reshape(rotvec.shape[:-1] + (3, 3))
 
 
-def rotvec_to_rotmat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
+def rotvec_to_rotmat(rotvec: Float[ArrayLike, "... 3"]) -> Float[Array, "... 3 3"]:
     """Rodrigues' formula R = I + sin(t)/t K + (1 - cos t)/t^2 K^2 with K = skew(rotvec), t = |rotvec|."""
     rotvec = jnp.asarray(rotvec)
     theta2 = jnp.sum(rotvec * rotvec, axis=-1)
@@ -35,7 +35,7 @@ def rotvec_to_rotmat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 3 3"]:
     return skew_polynomial(rotvec, sinc, cosc)
 
 
-def rotmat_to_quat(rotmat: Float[Array, "... 3 3"]) -> Float[Array, "... 4"]:
+def rotmat_to_quat(rotmat: Float[ArrayLike, "... 3 3"]) -> Float[Array, "... 4"]:
     """Unit quaternion (w, x, y, z) with w >= 0, from the best-conditioned of the four standard formulas."""
     m = rotmat
     m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
@@ -56,7 +56,7 @@ def rotmat_to_quat(rotmat: Float[Array, "... 3 3"]) -> Float[Array, "... 4"]:
     return jnp.where(quat[..., :1] < 0, -quat, quat)
 
 
-def quat_to_rotvec(quat: Float[Array, "... 4"]) -> Float[Array, "... 3"]:
+def quat_to_rotvec(quat: Float[ArrayLike, "... 4"]) -> Float[Array, "... 3"]:
     """Axis-angle of a unit quaternion (w, x, y, z); angle in [0, pi]."""
     quat = jnp.where(quat[..., :1] < 0, -quat, quat)
     w, v = quat[..., 0], quat[..., 1:]
@@ -69,7 +69,7 @@ def quat_to_rotvec(quat: Float[Array, "... 4"]) -> Float[Array, "... 3"]:
     return factor[..., None] * v
 
 
-def quat_to_rotmat(quat: Float[Array, "... 4"]) -> Float[Array, "... 3 3"]:
+def quat_to_rotmat(quat: Float[ArrayLike, "... 4"]) -> Float[Array, "... 3 3"]:
     """Rotation matrix of a quaternion (w, x, y, z); the quaternion is normalised first."""
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
@@ -81,7 +81,7 @@ def quat_to_rotmat(quat: Float[Array, "... 4"]) -> Float[Array, "... 3 3"]:
     return jnp.stack(rows, axis=-1).reshape(quat.shape[:-1] + (3, 3))
 
 
-def rotvec_to_quat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 4"]:
+def rotvec_to_quat(rotvec: Float[ArrayLike, "... 3"]) -> Float[Array, "... 4"]:
     """Unit quaternion (w, x, y, z) of an axis-angle vector."""
     theta2 = jnp.sum(rotvec * rotvec, axis=-1)
     small = theta2 < _SMALL
@@ -91,12 +91,12 @@ def rotvec_to_quat(rotvec: Float[Array, "... 3"]) -> Float[Array, "... 4"]:
     return jnp.concatenate([w[..., None], half_sinc[..., None] * rotvec], axis=-1)
 
 
-def rotmat_to_rotvec(rotmat: Float[Array, "... 3 3"]) -> Float[Array, "... 3"]:
+def rotmat_to_rotvec(rotmat: Float[ArrayLike, "... 3 3"]) -> Float[Array, "... 3"]:
     """Axis-angle of a rotation matrix; angle in [0, pi]."""
     return quat_to_rotvec(rotmat_to_quat(rotmat))
 
 
-def rot6d_to_rotmat(rot6d: Float[Array, "... 6"]) -> Float[Array, "... 3 3"]:
+def rot6d_to_rotmat(rot6d: Float[ArrayLike, "... 6"]) -> Float[Array, "... 3 3"]:
     """The 6D representation (a 3x2 matrix read row by row) to a rotation by Gram-Schmidt of its columns."""
     a = rot6d.reshape(rot6d.shape[:-1] + (3, 2))
     a1, a2 = a[..., 0], a[..., 1]
@@ -107,6 +107,7 @@ def rot6d_to_rotmat(rot6d: Float[Array, "... 6"]) -> Float[Array, "... 3 3"]:
     return jnp.stack([b1, b2, b3], axis=-1)
 
 
-def rotmat_to_rot6d(rotmat: Float[Array, "... 3 3"]) -> Float[Array, "... 6"]:
+def rotmat_to_rot6d(rotmat: Float[ArrayLike, "... 3 3"]) -> Float[Array, "... 6"]:
     """The first two columns of a rotation matrix, read row by row (inverse of `rot6d_to_rotmat`)."""
+    rotmat = jnp.asarray(rotmat)
     return rotmat[..., :, :2].reshape(rotmat.shape[:-2] + (6,))

@@ -5,12 +5,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from jaxtyping import install_import_hook
+
+# The tests check every call of the packages' functions and dataclasses against their annotations (jaxtyping's
+# shapes and dtypes, beartype the rest), as optimistix's tests do. The hook must be in place before the packages
+# are first imported, so it is installed here and not by `--jaxtyping-packages=...` in addopts: jaxtyping's
+# plugin (0.3.11) splits a typechecker that takes arguments from one package only, and beartype needs them here:
+# the numeric tower (an int where a float is annotated, as PEP 484 allows) and every item of containers checked.
+install_import_hook(
+    ["smplx_jax", "jaxmocap", "train"],
+    "beartype.beartype(conf=beartype.BeartypeConf(is_pep484_tower=True, strategy=beartype.BeartypeStrategy.On))")
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from random_model import random_model_arrays  # noqa: E402
-
 import smplx_jax  # noqa: E402
+from random_model import random_model_arrays  # noqa: E402
 from smplx_jax.default_model import default_model_path  # noqa: E402
 
 

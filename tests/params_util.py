@@ -18,7 +18,8 @@ def random_rotvecs(rng, shape, max_angle=3.5):
 def random_params(seed, batch, num_betas=10, num_expression=10, max_angle=3.5) -> smplx_jax.SMPLXParams:
     """A batch (leading axis) of random bodies."""
     rng = np.random.default_rng(seed)
-    f = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+    def f(a):
+        return jnp.asarray(a, jnp.float32)
     return smplx_jax.SMPLXParams(
         global_orient=f(random_rotvecs(rng, (batch,), max_angle)),
         body_pose=f(random_rotvecs(rng, (batch, 21), max_angle)),
@@ -38,7 +39,8 @@ def torch_inputs(params: smplx_jax.SMPLXParams, **hands) -> dict:
     import torch
 
     batch = params.betas.shape[0]
-    t = lambda a: torch.tensor(np.asarray(a), dtype=torch.float32).reshape(batch, -1)  # noqa: E731
+    def t(a):
+        return torch.tensor(np.asarray(a), dtype=torch.float32).reshape(batch, -1)
     names = ("global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "jaw_pose", "leye_pose",
              "reye_pose", "betas", "expression", "transl")
     kwargs = {name: t(getattr(params, name)) for name in names}

@@ -11,8 +11,16 @@ import cv2
 import numpy as np
 import pytest
 
-from jaxmocap.detect import (Detector, MediaError, ModelFileError, detect_media, ensure_models, read_openpose_json,
-                             to_openpose, write_openpose_json)
+from jaxmocap.detect import (
+    Detector,
+    MediaError,
+    ModelFileError,
+    detect_media,
+    ensure_models,
+    read_openpose_json,
+    to_openpose,
+    write_openpose_json,
+)
 from jaxmocap.detect import models as model_files
 from jaxmocap.detect.hands import HandEstimator
 from jaxmocap.detect.openpose import body25_from_blazepose, json_name

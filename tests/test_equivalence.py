@@ -6,17 +6,20 @@ import numpy as np
 import pytest
 import smplx
 import torch
-from conftest import load
-from params_util import random_params, torch_inputs
 
 import smplx_jax
+from conftest import load
+from params_util import random_params, torch_inputs
 
 BATCH = 24
 TOL = 1e-5
 NUM_PCA = 12
 FORWARD = jax.jit(jax.vmap(smplx_jax.forward, in_axes=(None, 0)))
 JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
-_vmap_hand = lambda fn: jax.vmap(fn, in_axes=(None, 0, None))  # noqa: E731
+
+
+def _vmap_hand(fn):
+    return jax.vmap(fn, in_axes=(None, 0, None))
 
 
 def _torch_model(model_dir, **options):
@@ -76,7 +79,6 @@ def test_equivalence_detects_a_wrong_model(random_model_dir, default_model_dir):
 def test_dense_skinning_weights_match_smplx(tmp_path):
     """A file whose vertices all weigh every joint takes the dense skinning product (not the per-vertex gather)."""
     from random_model import random_model_arrays
-
     from smplx_jax.forward import MAX_GATHERED_JOINTS
     arrays = random_model_arrays(seed=3)
     arrays["weights"] = np.random.default_rng(3).dirichlet(np.ones(arrays["weights"].shape[1]), len(arrays["weights"]))

@@ -8,14 +8,14 @@ import struct
 import jax
 import numpy as np
 import pytest
-from conftest import load
-from params_util import random_params
 
 import smplx_jax
+from conftest import load
 from jaxmocap.export import animation, global_transforms, write_bvh, write_gltf
 from jaxmocap.export.animation import CAMERA_TO_WORLD
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
+from params_util import random_params
 from smplx_jax.rotations import quat_to_rotmat, rotvec_to_rotmat
 
 T, FPS, SIZE, FOCAL = 12, 25.0, (1000.0, 800.0), 1200.0

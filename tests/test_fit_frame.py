@@ -81,7 +81,8 @@ def test_the_descents_model_has_the_costs_gradient(x64, default_model_dir, focal
     y = least_squares.Unknowns(pose + 0.3 * jnp.asarray(rng.normal(size=(55, 3))), betas + 0.1,
                                jnp.asarray([np.log(390.0), 480.0, 510.0]))
     y = y._replace(pose_rotvecs=y.pose_rotvecs.at[19, 1].set(0.2))  # a bending limit active
-    cost = lambda y: 0.5 * sum(jnp.sum(r**2) for r in least_squares.residuals(y, problem, config))  # noqa: E731
+    def cost(y):
+        return 0.5 * sum(jnp.sum(r**2) for r in least_squares.residuals(y, problem, config))
     gradient, hessian, _ = least_squares.IRLSModel(problem, config)(y)
     for a, b in zip(gradient, jax.grad(cost)(y)):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * float(jnp.abs(b).max()))

@@ -4,10 +4,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import load
-from params_util import random_params
 
 import smplx_jax
+from conftest import load
+from params_util import random_params
 from smplx_jax import constants
 from smplx_jax.hand import hand_forward, hand_model
 

@@ -12,17 +12,16 @@ import numpy as np
 import pytest
 import smplx
 import torch
-from conftest import load
-from params_util import random_params
 
 import smplx_jax
+from conftest import load
 from jaxmocap.batching import bucket_size
 from jaxmocap.cli import main
 from jaxmocap.detect.openpose import json_name, write_openpose_json
-from jaxmocap.integrate import copy_paste, fit, fit_frame, ik, smooth_params, smooth_rotvecs, synthetic
-from jaxmocap.integrate import fitting
-from jaxmocap.pipeline.fit_folder import infer_image_size
+from jaxmocap.integrate import copy_paste, fit, fit_frame, fitting, ik, smooth_params, smooth_rotvecs, synthetic
 from jaxmocap.motion import motion_params, read_motion
+from jaxmocap.pipeline.fit_folder import infer_image_size
+from params_util import random_params
 from smplx_jax import constants, rotations
 
 T = 32  # frames per synthetic problem: one bucket
@@ -148,8 +147,11 @@ def test_a_pinhole_fit_recovers_a_near_body_and_its_place(model):
     # the stored weak perspective is the closest one: nearer than the one at the body origin's depth
     seen = near.keypoints[..., 2] > 0
     pixels = 900.0 * joints[..., :2] / joints[..., 2:] + centre
-    weak_error = lambda scale, trans: np.sum(seen[..., None] * (  # noqa: E731
-        np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None] - pixels) ** 2, (1, 2))
+
+    def weak_error(scale, trans):
+        return np.sum(seen[..., None] * (
+            np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None] - pixels) ** 2, (1, 2))
+
     transl = np.asarray(pinhole.params.transl)
     at_origin = weak_error(900.0 / transl[:, 2], 900.0 * transl[:, :2] / transl[:, 2:] + centre)
     assert np.all(weak_error(pinhole.camera_scale, pinhole.camera_trans) <= at_origin * (1 + 1e-4))
@@ -221,7 +223,8 @@ def test_ik_recovers_joint_rotations_from_3d_joints(model):
     free = tuple(j not in (22, 23, 24) for j in range(55))
     fitted, _, cam, ok = ik(model, index, joints, np.ones(joints.shape[:2]), start, betas, free)
     assert np.all(np.asarray(ok))
-    rot = lambda a: rotations.rotvec_to_rotmat(jnp.asarray(a))  # noqa: E731
+    def rot(a):
+        return rotations.rotvec_to_rotmat(jnp.asarray(a))
     err, err0 = _geodesic(rot(fitted), rot(theta))[:, list(free)], _geodesic(rot(start), rot(theta))[:, list(free)]
     assert np.median(err) < 0.6 * np.median(err0), (np.median(err), np.median(err0))
     assert np.median(err[:, 0]) < 0.02  # the root is fully determined by the hips and spine
@@ -289,7 +292,8 @@ def test_fit_command_writes_a_motion_file_that_smplx_reproduces(model, noisy, de
 
     body = smplx.create(str(default_model_dir), model_type="smplx", use_pca=False, flat_hand_mean=True,
                         batch_size=T)
-    t = lambda k: torch.tensor(data[k]).reshape(T, -1)  # noqa: E731
+    def t(k):
+        return torch.tensor(data[k]).reshape(T, -1)
     with torch.no_grad():
         joints = body(global_orient=t("global_orient"), body_pose=t("body_pose"), left_hand_pose=t("left_hand_pose"),
                       right_hand_pose=t("right_hand_pose"), jaw_pose=t("jaw_pose"), betas=t("betas"),

@@ -7,10 +7,10 @@ import types
 
 import numpy as np
 import pytest
-from conftest import load
-from random_model import random_model_arrays
 
 import smplx_jax
+from conftest import load
+from random_model import random_model_arrays
 from smplx_jax import ModelFileError, ModelNotFoundError
 
 

@@ -5,9 +5,9 @@ from pathlib import Path
 import cv2
 import jax
 import numpy as np
-from conftest import load
 
 import smplx_jax
+from conftest import load
 from jaxmocap.overlay import OverlayWriter, Posed, body_up, mesh_over_frame, upright
 from jaxmocap.poses import example_pose
 

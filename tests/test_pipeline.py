@@ -20,9 +20,9 @@ import smplx_jax
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
 from jaxmocap.io import file_sha256
+from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from jaxmocap.pipeline import Observations, RunConfig
 from jaxmocap.pipeline.observe import fill_hand_gaps
-from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from smplx_jax import constants
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -125,7 +125,10 @@ def test_frankmocap_pickles_hold_every_person(result, tmp_path):
     out, _ = result
     motion = read_motion(out / "motion.npz")
     data = [pickle.loads(f.read_bytes()) for f in sorted((out / "mocap").iterdir())]
-    xyxy = lambda b: np.concatenate([b[:2], b[:2] + b[2:]]) if b is not None else np.full(4, np.nan)  # noqa: E731
+
+    def xyxy(b):
+        return np.concatenate([b[:2], b[:2] + b[2:]]) if b is not None else np.full(4, np.nan)
+
     body = np.stack([xyxy(d["body_bbox_list"][0]) for d in data])
     hands = np.stack([[xyxy(d["hand_bbox_list"][0][f"{s}_hand"]) for s in ("left", "right")] for d in data])
     other = dict(motion, transl=motion["transl"] + [0.4, 0.0, 1.0])
@@ -148,7 +151,8 @@ def assert_frankmocap_projection(data, k, motion):
         assert all(person[key].dtype == np.float32 for key in PERSON_SHAPES if key != "bbox_top_left")
         _, ratio, top_left = ref.body_crop(np.zeros((1080, 1920, 3), np.uint8), d["body_bbox_list"][k])
         assert person["bbox_scale_ratio"] == pytest.approx(ratio) and np.array_equal(person["bbox_top_left"], top_left)
-    t = lambda key: torch.from_numpy(np.stack([p[key][0] for p in people]))  # noqa: E731
+    def t(key):
+        return torch.from_numpy(np.stack([p[key][0] for p in people]))
     layer = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
                          flat_hand_mean=False, num_betas=10, batch_size=len(people))  # FrankMocap's SMPLX layer
     with torch.no_grad():
@@ -186,7 +190,8 @@ def smplx_joints(motion):
     frames = len(motion["valid"])
     body = smplx.create(str(smplx_jax.default_model_path().parent.parent), model_type="smplx", use_pca=False,
                         flat_hand_mean=True, num_betas=motion["betas"].shape[1], batch_size=frames)
-    t = lambda k: torch.from_numpy(np.ascontiguousarray(motion[k], np.float32)).reshape(frames, -1)  # noqa: E731
+    def t(k):
+        return torch.from_numpy(np.ascontiguousarray(motion[k], np.float32)).reshape(frames, -1)
     with torch.no_grad():
         return body(global_orient=t("global_orient"), body_pose=t("body_pose"), left_hand_pose=t("left_hand_pose"),
                     right_hand_pose=t("right_hand_pose"), jaw_pose=t("jaw_pose"), betas=t("betas"),
@@ -316,7 +321,8 @@ def test_given_keypoints_replace_the_detectors(result, tmp_path):
     seen = original["keypoints_2d"][..., 2] > 0
     np.testing.assert_allclose(shifted["keypoints_2d"][..., 0][seen], original["keypoints_2d"][..., 0][seen] + 30,
                                atol=1e-2)
-    origin_x = lambda m: m["focal_length"] * m["transl"][:, 0] / m["transl"][:, 2]  # noqa: E731  (the body origin's)
+    def origin_x(m):  # the body origin's
+        return m["focal_length"] * m["transl"][:, 0] / m["transl"][:, 2]
     assert np.median(origin_x(shifted) - origin_x(original)) > 20
 
 

@@ -128,7 +128,7 @@ def test_left_hand_flip_round_trip():
     img = _image(200, 300)
     window = crops.hand_windows(np.array([[40.0, 30, 50, 70], [200, 120, 90, 60]]), (300, 200))
     plain = np.asarray(crops.crop(img[None], 0, window))
-    flipped = np.asarray(crops.crop(img[None], 0, window, flip=[True, False]))
+    flipped = np.asarray(crops.crop(img[None], 0, window, flip=np.array([True, False])))
     assert np.array_equal(flipped[0], plain[0, :, ::-1]) and np.array_equal(flipped[1], plain[1])
     raw = np.random.default_rng(0).normal(size=(5, 61)).astype(np.float32)
     mirrored = np.asarray(R.mirror_hand_params(raw))
@@ -157,7 +157,8 @@ def test_missing_hand_skips_its_crop(predictor):
     raw, window, valid = R.predict_hands(predictor, images, [0, 1, 1], boxes, [False, False, True])
     assert valid.tolist() == [True, False, True] and np.all(np.isnan(np.asarray(raw[1])))
     sub = crops.Window(*(np.asarray(a)[[0, 2]] for a in window))
-    expected = predictor.hand(crops.normalize_hand(crops.crop(images, [0, 1], sub, flip=[False, True])))
+    expected = predictor.hand(crops.normalize_hand(crops.crop(images, np.array([0, 1]), sub,
+                                                              flip=np.array([False, True]))))
     assert np.abs(np.asarray(raw)[[0, 2]] - np.asarray(expected)).max() <= 1e-5
     compiled = crops._sample._cache_size(), _apply._cache_size()
     for present in ([True, True, False], [True, True, True], [False, False, False]):  # all in bucket 8
@@ -177,7 +178,8 @@ def test_left_hand_decodes_to_the_mirror_image(body_model):
     raw = np.random.default_rng(3).normal(0, 0.2, (1, 61)).astype(np.float32)
     raw[:, 0] = 6.0
     window = crops.hand_windows(np.array([[100.0, 100, 60, 60]] * 2), (640, 480))
-    out = R.decode_hands(model, smplx_jax.hand_model(model, "right"), np.repeat(raw, 2, 0), [False, True], window)
+    out = R.decode_hands(model, smplx_jax.hand_model(model, "right"), np.repeat(raw, 2, 0), np.array([False, True]),
+                         window)
     centre = window.origin[0, 0] + 112 / window.ratio[0]
     joints = np.asarray(out.joints_2d)
     assert np.allclose(joints[1, :, 0], 2 * centre - joints[0, :, 0], atol=1e-3)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from params_util import random_rotvecs
 
+from params_util import random_rotvecs
 from smplx_jax import rotations as rot
 
 ROTVECS = random_rotvecs(np.random.default_rng(0), (400,), max_angle=np.pi - 1e-3).astype(np.float32)

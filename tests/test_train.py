@@ -12,8 +12,8 @@ import pytest
 
 from jaxmocap.regressors import load_network
 from train import configs
-from train.datasets.synthetic import SyntheticHands
 from train.batches import batch_at
+from train.datasets.synthetic import SyntheticHands
 from train.train import create, jitted_train_step, train_and_evaluate
 
 SMOKE = configs.get("smoke").replace(image_size=32, batch_size=4, num_steps=4, eval_every=2, eval_examples=4,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from jaxmocap.regressors import crops
-from train import augment, blur, batches
+from train import augment, batches, blur
 from train.datasets.sample import BodySample, HandSample
 
 GEOMETRY_ONLY = dataclasses.replace(augment.AugmentConfig(), channel_gain=0.0, brightness=0.0, contrast=0.0,
@@ -110,7 +110,8 @@ def test_hand_labels_follow_pixels(is_left):
     points = _grid(box, 21, rng)
     colours = _colours(21)
     sample = _hand_sample(_dots(points, (256, 256), colours), box, points, is_left=is_left)
-    make = lambda r: augment.hand_example(sample, 128, r, GEOMETRY_ONLY)  # noqa: E731
+    def make(r):
+        return augment.hand_example(sample, 128, r, GEOMETRY_ONLY)
     _check_dots(make, 128, colours, np.arange(21), range(25), False)
 
 
@@ -122,7 +123,8 @@ def test_body_labels_follow_pixels(flip):
     colours = _colours(25)
     sample = _body_sample(_dots(points, (320, 280), colours), box, points)
     config = dataclasses.replace(GEOMETRY_ONLY, flip_prob=flip)
-    make = lambda r: augment.body_example(sample, 128, r, config)  # noqa: E731
+    def make(r):
+        return augment.body_example(sample, 128, r, config)
     order = augment.BODY_25_MIRROR if flip else np.arange(25)
     _check_dots(make, 128, colours, order, range(25), True)
 
@@ -291,7 +293,8 @@ def test_large_kernels_blur_like_a_plain_filter():
 
 def test_blur_lowers_gradient_energy():
     image = np.random.default_rng(10).integers(0, 256, (96, 96, 3), dtype=np.uint8)
-    energy = lambda im: sum(np.square(np.diff(im.astype(float), axis=a)).mean() for a in (0, 1))  # noqa: E731
+    def energy(im):
+        return sum(np.square(np.diff(im.astype(float), axis=a)).mean() for a in (0, 1))
     for seed in range(5):
         kernel = blur.motion_blur_kernel(np.random.default_rng(seed), 11)
         assert energy(blur.blur(image, kernel)) < 0.5 * energy(image)

@@ -12,8 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from train.datasets import eft, h36m
-from train.datasets import body_joints
+from train.datasets import body_joints, eft, h36m
 from train.datasets.sample import box_of_joints
 
 # OpenPose's BODY_25 output order (doc/02_output.md), in the adapters' snake_case names.

@@ -115,7 +115,7 @@ def test_the_labels_own_parameters_score_near_perfectly():
     right_hand = smplx_jax.hand_model(model, "right")
     dataset = open_dataset("synthetic_hands", "unused", "test")
     left = [dataset.params(i).is_left for i in range(32)]
-    samples = [dataset[i] for i in np.concatenate([np.flatnonzero(left)[:2], np.flatnonzero(~np.array(left))[:2]])]
+    samples = [dataset[int(i)] for i in np.concatenate([np.flatnonzero(left)[:2], np.flatnonzero(~np.array(left))[:2]])]
     raws = []
     for example in (hand_example(s, crops.SIZE) for s in samples):
         pose = np.concatenate([example.pose[:1], smplx_jax.hand_pose_to_relative(model, example.pose[1:], "right")])

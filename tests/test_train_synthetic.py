@@ -4,13 +4,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import load
 
 import smplx_jax
+from conftest import load
 from smplx_jax import constants
 from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
-from train.datasets.sample import NUM_BODY_JOINTS, NUM_HAND_JOINTS, BodySample, HandSample
 from train.datasets import synthetic_poses
+from train.datasets.sample import NUM_BODY_JOINTS, NUM_HAND_JOINTS, BodySample, HandSample
 from train.datasets.synthetic import SyntheticBodies, SyntheticHands, read_bodies, read_hands
 from train.datasets.synthetic_render import PinholeCamera, render
 

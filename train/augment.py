@@ -28,7 +28,7 @@ MIRROR_ROTVEC = np.array([1.0, -1.0, -1.0])  # an axis-angle conjugated by the x
 
 @dataclasses.dataclass(frozen=True)
 class AugmentConfig:
-    """Random crop and appearance changes (defaults: hands, after SPIN's factors); `none()` for evaluation."""
+    """Random crop and appearance changes (defaults: hands, after SPIN's factors)."""
 
     scale: float = 0.25  # crop side times U(1 - scale, 1 + scale)
     translate: float = 0.1  # crop centre moved by U(-t, t) crop sides along each axis
@@ -42,12 +42,6 @@ class AugmentConfig:
     blur_length: tuple[float, float] = (0.02, 0.08)  # shake path length, fraction of the crop side
     blur_exposure: tuple[float, float] = (0.5, 1.0)  # fraction of the path the shutter sees
     blur_anxiety: float = 0.005  # Boracchi & Foi's demo value
-
-    @classmethod
-    def none(cls) -> "AugmentConfig":
-        """No change at all: with an ``rng`` the crop is the evaluation crop's geometry (reading around the window)."""
-        return cls(scale=0.0, translate=0.0, rotate_deg=0.0, rotate_prob=0.0, flip_prob=0.0, channel_gain=0.0,
-                   brightness=0.0, contrast=0.0, blur_prob=0.0)
 
     @classmethod
     def body(cls) -> "AugmentConfig":

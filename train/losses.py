@@ -11,7 +11,7 @@ masked off is exactly 0, with finite gradients. Regularisers are sums of squares
 from typing import NamedTuple
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 import smplx_jax
 from jaxmocap.regressors.body import BodyOutput
@@ -137,7 +137,7 @@ def _masked_mean_square(diff: Float[Array, "J 2"], mask) -> Float[Array, ""]:
     return jnp.mean(jnp.where(mask[:, None], diff ** 2, 0.0))
 
 
-def _safe_norm(v: Float[Array, "3"]) -> Float[Array, ""]:
+def _safe_norm(v: Float[ArrayLike, "3"]) -> Float[Array, ""]:
     """|v|, and 1 for a zero vector (a masked-off label), with finite gradients either way."""
     sq = jnp.sum(v * v)
     return jnp.sqrt(jnp.where(sq > 0, sq, 1.0))

@@ -66,7 +66,7 @@ def procrustes_align(pred: Float[np.ndarray, "J 3"], gt: Float[np.ndarray, "J 3"
 def pck(errors: Float[np.ndarray, "N J"], threshold: float, mask: Bool[np.ndarray, "N J"]) -> float:
     """Fraction of labelled joints with error <= ``threshold``, per joint then averaged over joints (NaN if no
     joint is labelled anywhere)."""
-    return float(pck_curve(errors, [threshold], mask)[0])
+    return float(pck_curve(errors, np.array([threshold], np.float64), mask)[0])
 
 
 def pck_curve(errors: Float[np.ndarray, "N J"], thresholds: Float[np.ndarray, "T"],

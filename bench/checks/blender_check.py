@@ -19,9 +19,8 @@ import re
 import sys
 import tempfile
 
-import bpy  # first: it puts Blender's own modules (addon_utils) on the path
-
 import addon_utils  # noqa: E402
+import bpy  # first: it puts Blender's own modules (addon_utils) on the path
 
 _NOISE = re.compile(r"zero length|warn|error|fail|traceback|exception", re.IGNORECASE)
 

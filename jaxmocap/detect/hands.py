@@ -20,8 +20,17 @@ from typing import NamedTuple
 import numpy as np
 
 from .models import TFLiteModel
-from .roi import (Rect, alignment_rect, box_rect, crop, normalize_radians, project, rotate_world, rotation_between,
-                  transform_rect)
+from .roi import (
+    Rect,
+    alignment_rect,
+    box_rect,
+    crop,
+    normalize_radians,
+    project,
+    rotate_world,
+    rotation_between,
+    transform_rect,
+)
 from .ssd import Detection, decode, remove_letterbox, ssd_anchor_centers, weighted_nms
 
 PALM_SIZE = 192

@@ -81,7 +81,8 @@ class IdentityTracker:
 
     def __init__(self, max_gap: int = 60, gate: float = 0.35, gate_per_frame: float = 0.05,
                  max_appearance: float = 0.6):
-        self.max_gap, self.gate, self.gate_per_frame, self.max_appearance = max_gap, gate, gate_per_frame, max_appearance
+        self.max_gap, self.gate, self.gate_per_frame = max_gap, gate, gate_per_frame
+        self.max_appearance = max_appearance
         self.tracks: list[Track] = []
         self.frame = 0
         self.next_id = 0

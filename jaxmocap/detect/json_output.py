@@ -11,8 +11,8 @@ import numpy as np
 
 from ..frame_source import MediaError, open_media
 from .detector import Detector, Person, as_bgr
-from .identities import IdentityTracker, identify
 from .draw import draw_openpose
+from .identities import IdentityTracker, identify
 from .openpose import body25_from_blazepose, hand21, json_name, write_openpose_json
 
 __all__ = ["detect_media", "to_openpose"]

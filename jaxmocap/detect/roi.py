@@ -115,10 +115,3 @@ def rotate_world(points: np.ndarray, rect: Rect) -> np.ndarray:
     out[:, 0] = c * points[:, 0] - s * points[:, 1]
     out[:, 1] = s * points[:, 0] + c * points[:, 1]
     return out
-
-
-def rect_corners(rect: Rect, image_size: tuple[int, int]) -> np.ndarray:
-    """The rect's 4 corners in pixels (for drawing and overlap tests)."""
-    w, h = image_size
-    return cv2.boxPoints(((rect.x_center * w, rect.y_center * h), (rect.width * w, rect.height * h),
-                          math.degrees(rect.rotation)))

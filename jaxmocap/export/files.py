@@ -3,7 +3,6 @@
 import sys
 from pathlib import Path
 
-
 import smplx_jax
 from jaxmocap.errors import InputError
 from jaxmocap.export.animation import animation
@@ -11,6 +10,7 @@ from jaxmocap.export.bvh import write_bvh
 from jaxmocap.export.gltf import write_gltf
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import read_motion
+
 
 def export_motion(motion_path, fmt: str, out, model_path=None, focal_px: float | None = None) -> Path:
     """Write ``out`` in ``fmt`` (``bvh`` or ``gltf``) from a motion file and its body model (default model when

@@ -4,10 +4,10 @@ perspective ``pixel = camera_scale * X[..., :2] + camera_trans``, or a pinhole
 of the default pipeline uses, motion.npz's ``focal_length`` and ``principal_point``)."""
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 
-def project(points: Float[Array, "... N 3"], scale: Float[Array, "..."], trans: Float[Array, "... 2"],
+def project(points: Float[ArrayLike, "... N 3"], scale: Float[ArrayLike, "..."], trans: Float[ArrayLike, "... 2"],
             focal_length=None, principal_point=None):
     """Pixels ``(..., N, 2)`` of model points under the pinhole camera when ``focal_length`` is given, else the
     weak-perspective one."""

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 from flax import nnx
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 import smplx_jax
 from jaxmocap.regressors.body import BodyOutput, BodyRegressor
@@ -146,7 +146,8 @@ def _error_px(model, output: BodyOutput, target, conf):
 def _one(graphdef, trainable, frozen, model, x, target, conf, rate, config: EFTConfig):
     """``config.steps`` Adam steps on one frame's copy of ``trainable``; returns the final prediction."""
     optimizer = optax.adam(rate)
-    first = lambda out: jax.tree.map(lambda a: a[0], out)  # noqa: E731
+    def first(out):
+        return jax.tree.map(lambda a: a[0], out)
 
     def predict(weights):
         return first(_predict(nnx.merge(graphdef, weights, frozen), x[None], config.trainable))
@@ -176,8 +177,8 @@ def _fine_tune(graphdef, state, crops, keypoints, model, rate, config: EFTConfig
     return EFTResult(output, error(model, initial, target, conf), error(model, output, target, conf))
 
 
-def fine_tune(graphdef: nnx.GraphDef, state: nnx.State, crops: Float[Array, "N H W 3"],
-              keypoints: Float[Array, "N 25 3"], model: smplx_jax.BodyModel,
+def fine_tune(graphdef: nnx.GraphDef, state: nnx.State, crops: Float[ArrayLike, "N H W 3"],
+              keypoints: Float[ArrayLike, "N 25 3"], model: smplx_jax.BodyModel,
               config: EFTConfig = EFTConfig()) -> EFTResult:
     """EFT of the body regressor ``(graphdef, state)`` on each of N frames: ``crops`` normalised as the network
     takes them, ``keypoints`` BODY_25 ``x, y`` in crop pixels (0..224) and confidence (0 or NaN: missing)."""

@@ -27,9 +27,9 @@ from jaxtyping import Array, Float, Int
 
 from jaxmocap.batching import map_in_buckets
 from jaxmocap.integrate import least_squares
-from jaxmocap.integrate.least_squares import prior_weights
 from jaxmocap.integrate.camera import weak_perspective_from_points, weak_perspective_least_squares
 from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, keypoints_cm, params_of
+from jaxmocap.integrate.least_squares import prior_weights
 from jaxmocap.sharding import shard_frames
 from smplx_jax import BodyModel, SMPLXParams, constants
 

@@ -29,6 +29,7 @@ from jaxtyping import Array, Float, Int
 import smplx_jax
 from jaxmocap.integrate import mat3
 from smplx_jax import BodyModel, SMPLXParams
+from smplx_jax.pytree import pytree_dataclass
 
 NUM_VERTEX_JOINTS = 21
 
@@ -37,7 +38,7 @@ def _static(**kwargs):
     return dataclasses.field(metadata=dict(static=True), **kwargs)
 
 
-@jax.tree_util.register_dataclass
+@pytree_dataclass
 @dataclasses.dataclass(frozen=True)
 class KeypointModel:
     """A body model reduced to what a fit to ``K`` keypoints needs (see `keypoint_model`). ``I`` is the most
@@ -121,7 +122,8 @@ def keypoint_model(model: BodyModel, index) -> KeypointModel:
     skin = skeleton + vertex @ vertex_skin  # (K, 55)
     reach = skin @ jnp.asarray(ancestors.T, dtype)
     joint_sd = model.joint_shapedirs[..., :nb]  # (55, 3, B)
-    cm = lambda a: jnp.transpose(a, (1, 2, 0))  # noqa: E731  (N, 3, B) -> (3, B, N)
+    def cm(a):  # (N, 3, B) -> (3, B, N)
+        return jnp.transpose(a, (1, 2, 0))
     posedirs = body.sparse_posedirs_cm.reshape(nj - 1, 3, 3, 3 * NUM_VERTEX_JOINTS)  # rows (joint, r, c)
     posedirs = jnp.transpose(posedirs, (1, 2, 0, 3)).reshape(9 * (nj - 1), 3 * NUM_VERTEX_JOINTS)
     known_posedirs = _known(posedirs)
@@ -194,7 +196,7 @@ class Linearization(NamedTuple):
     x: Float[Array, "3 K"]  # the keypoints
     p: Float[Array, "3 55"]  # joint positions
     a: Float[Array, "3 3 55"]  # world increment per unit dtheta: G_parent J_l(theta)
-    jb: Float[Array, "B 3K"]  # dx/dbetas, row b holds all x then all y then all z
+    jb: Float[Array, "B 3*K"]  # dx/dbetas, row b holds all x then all y then all z
     offsets: Float[Array, "3 P"]  # W_i (y_i - x_v) of the blended pairs (the blended skinning's correction)
     jl: Float[Array, "3 3 55"]  # J_l(theta), the local increment per unit dtheta (pose blend shapes)
     rel: Float[Array, "3 3 55"]

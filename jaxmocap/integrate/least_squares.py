@@ -36,9 +36,8 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
-from jaxmocap.integrate import mat3
+from jaxmocap.integrate import keypoints, mat3
 from jaxmocap.integrate.descent import DampedNewtonCG, DampingSearch
-from jaxmocap.integrate import keypoints
 from jaxmocap.integrate.keypoints import KeypointModel, Linearization
 
 # One-sided joint limits (SMPLify-X's angle prior, and the fingers'): (joint, axis component, sign, slack):

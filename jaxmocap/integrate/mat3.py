@@ -12,8 +12,9 @@ def cross(a: Float[Array, "3 N"], b: Float[Array, "3 N"]) -> Float[Array, "3 N"]
     return jnp.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def matvec(m: Float[Array, "3 3 N"], v: Float[Array, "3 ... N"]) -> Float[Array, "3 ... N"]:
-    """``m @ v`` per column (``v`` may hold several vectors per column, ``(3, B, N)``)."""
+def matvec(m: Float[Array, "3 3 ... N"], v: Float[Array, "3 ... N"]) -> Float[Array, "3 ... N"]:
+    """``m @ v`` per column (``m`` and ``v`` may hold several per column, broadcast: ``(3, 3, B, N)``,
+    ``(3, B, N)``)."""
     return jnp.stack([m[i, 0] * v[0] + m[i, 1] * v[1] + m[i, 2] * v[2] for i in range(3)])
 
 

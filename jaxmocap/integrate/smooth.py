@@ -64,8 +64,10 @@ def smooth_rotvecs(rotvecs: Float[Array, "T ... 3"], valid: Bool[Array, "T"], ke
 def smooth_params(params: SMPLXParams, valid: Bool[Array, "T"], kernel=KERNEL) -> SMPLXParams:
     """Every rotation of a batch of bodies (T leading) smoothed as rotations; shape, expression, ``transl``
     linearly."""
-    rot = lambda a: smooth_rotvecs(a, valid, kernel)  # noqa: E731
-    lin = lambda a: smooth_linear(a, valid, kernel)  # noqa: E731
+    def rot(a):
+        return smooth_rotvecs(a, valid, kernel)
+    def lin(a):
+        return smooth_linear(a, valid, kernel)
     return SMPLXParams(rot(params.global_orient), rot(params.body_pose), rot(params.left_hand_pose),
                        rot(params.right_hand_pose), rot(params.jaw_pose), rot(params.leye_pose), rot(params.reye_pose),
                        lin(params.betas), lin(params.expression), lin(params.transl))

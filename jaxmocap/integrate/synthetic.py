@@ -55,7 +55,8 @@ def random_pose(rng, t: int) -> np.ndarray:
 
 def _params(theta, betas, num_expression):
     t = theta.shape[0]
-    f = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+    def f(a):
+        return jnp.asarray(a, jnp.float32)
     return SMPLXParams(f(theta[:, 0]), f(theta[:, 1:22]), f(theta[:, 25:40]), f(theta[:, 40:55]), f(theta[:, 22]),
                        f(theta[:, 23]), f(theta[:, 24]), f(betas), jnp.zeros((t, num_expression)), jnp.zeros((t, 3)))
 

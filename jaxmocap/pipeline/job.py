@@ -5,8 +5,8 @@ detector's 2D keypoints and 3D landmarks -> IK of body and hands from the landma
 through a pinhole camera. With FrankMocap's converted weights: body and hand regressors on the detector's boxes ->
 copy-and-paste -> optionally the same fit. Frames go in chunks; each finished chunk is stored, so an interrupted
 run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (each chunk stores what
-the detector and the identities carry on to the next). Then over the whole sequence: temporal smoothing -> ``motion.npz`` -> the
-outputs.
+the detector and the identities carry on to the next). Then over the whole sequence, for each person: temporal
+smoothing -> ``motion.npz`` -> the outputs.
 """
 
 import dataclasses
@@ -20,8 +20,8 @@ import numpy as np
 import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.identities import IdentityTracker
-from jaxmocap.io import file_sha256
 from jaxmocap.frame_source import Media, open_media
+from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore
@@ -175,7 +175,9 @@ def _tracking(detector: Detector, tracker: IdentityTracker | None) -> dict[str, 
 
 
 def _restore(tracking: dict[str, np.ndarray], detector: Detector, tracker: IdentityTracker | None) -> None:
-    part = lambda prefix: {k.split("/", 1)[1]: v for k, v in tracking.items() if k.startswith(prefix)}  # noqa: E731
+    def part(prefix):
+        return {k.split("/", 1)[1]: v for k, v in tracking.items() if k.startswith(prefix)}
+
     detector.restore(part("detector/"))
     if tracker is not None:
         tracker.restore(part("identities/"))

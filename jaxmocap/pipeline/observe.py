@@ -133,9 +133,10 @@ def repair_side_swaps(obs: Observations, ratio: float = 0.5) -> Observations:
             seen = (now[left, 2] > 0) & (now[right, 2] > 0) & (before[left, 2] > 0) & (before[right, 2] > 0)
             if not seen.any():
                 continue
-            distance = lambda a, b: np.linalg.norm(now[a, :2] - before[b, :2], axis=-1)[seen].mean()  # noqa: E731
+            def distance(a, b):
+                return np.linalg.norm(now[a, :2] - before[b, :2], axis=-1)[seen].mean()
             same = distance(left, left) + distance(right, right)
             swapped = distance(left, right) + distance(right, left)
             if swapped < ratio * same and same > 0.2 * torso:
-                _swap_sides(obs, t, group)
+                _swap_sides(obs, int(t), group)
     return obs

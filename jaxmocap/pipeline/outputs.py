@@ -46,7 +46,7 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dic
                 vertices = np.asarray(_VERTICES(model, motion_params(motion, model.num_expression, rows)))
                 for k, t in enumerate(rows[:len(batch)]):
                     if motion["valid"][t]:
-                        people[k].append(Posed(person_id, vertices[k], motion["camera_scale"][t],
+                        people[k].append(Posed(person_id, vertices[k], float(motion["camera_scale"][t]),
                                                motion["camera_trans"][t]))
             writer.write(*zip(batch, people))
             bar.update(len(batch))

@@ -12,12 +12,12 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.detect import Detector
+from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.integrate import FitConfig, body_from_blazepose, fit, fitted_motion, hand_into_body
 from jaxmocap.integrate.camera import default_focal_length
 from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.integrate.smooth import smooth_camera, smooth_params
-from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.pipeline.observe import Observations, observe_people, repaired
 from jaxmocap.pipeline.records import Bodies
 

@@ -11,7 +11,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int, UInt8
+from jaxtyping import Array, ArrayLike, Bool, Float, Int, UInt8
 
 SIZE = 224
 IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)  # RGB
@@ -105,9 +105,10 @@ def _sample(images, frame, origin, size, content, flip):
     return jnp.where(flip[:, None, None, None], out[:, :, ::-1], out)
 
 
-def crop(images: UInt8[Array, "F H W 3"], frame: Int[np.ndarray, "N"], window: Window,
-         flip: Bool[np.ndarray, "N"] | None = None) -> Float[Array, "N 224 224 3"]:
-    """The 0..255 BGR crops of ``window`` from ``images[frame]``; ``flip`` mirrors a crop left-right."""
+def crop(images: UInt8[ArrayLike, "F H W 3"], frame: int | Int[np.ndarray, "N"], window: Window,
+         flip: bool | Bool[np.ndarray, "N"] | None = None) -> Float[Array, "N 224 224 3"]:
+    """The 0..255 BGR crops of ``window`` from ``images[frame]``; ``flip`` mirrors a crop left-right (``frame``
+    and ``flip`` may be one for all)."""
     images = jnp.asarray(images)
     if images.ndim != 4 or images.shape[-1] != 3:
         raise ValueError(f"images: expected (F, H, W, 3) uint8 BGR, got shape {images.shape}")
@@ -117,29 +118,31 @@ def crop(images: UInt8[Array, "F H W 3"], frame: Int[np.ndarray, "N"], window: W
     return _sample(images, frame, *(np.asarray(a, np.int32) for a in window[:3]), flip)
 
 
-def normalize_body(crops: Float[Array, "N 224 224 3"]) -> Float[Array, "N 224 224 3"]:
+def normalize_body(crops: Float[ArrayLike, "*batch H W 3"]) -> Float[Array, "*batch H W 3"]:
     """BGR 0..255 -> RGB, ImageNet mean/std (the body network's input)."""
-    return (crops[..., ::-1] / 255.0 - IMAGENET_MEAN) / IMAGENET_STD
+    return (jnp.asarray(crops)[..., ::-1] / 255.0 - IMAGENET_MEAN) / IMAGENET_STD
 
 
-def normalize_hand(crops: Float[Array, "N 224 224 3"]) -> Float[Array, "N 224 224 3"]:
+def normalize_hand(crops: Float[ArrayLike, "*batch H W 3"]) -> Float[Array, "*batch H W 3"]:
     """BGR kept, (x/255 - 0.5)/0.5 (the hand network's input)."""
-    return (crops / 255.0 - 0.5) / 0.5
+    return (jnp.asarray(crops) / 255.0 - 0.5) / 0.5
 
 
-def body_to_image(points: Float[Array, "N P 3"], camera: Float[Array, "N 3"], window: Window) -> Float[Array, "N P 2"]:
+def body_to_image(points: Float[ArrayLike, "N P 3"], camera: Float[ArrayLike, "N 3"], window: Window
+                  ) -> Float[Array, "N P 2"]:
     """Pixels of body points: ``((X s) + t) 112 / ratio + top_left + 112 / ratio``."""
     crop_xy = (points[..., :2] * camera[:, None, :1] + camera[:, None, 1:]) * (SIZE / 2)
     return _crop_to_image(crop_xy, window)
 
 
-def hand_to_image(points: Float[Array, "N P 3"], camera: Float[Array, "N 3"], window: Window) -> Float[Array, "N P 2"]:
+def hand_to_image(points: Float[ArrayLike, "N P 3"], camera: Float[ArrayLike, "N 3"], window: Window
+                  ) -> Float[Array, "N P 2"]:
     """Pixels of hand points: ``((X + t) s) 112 / ratio + top_left + 112 / ratio``."""
     crop_xy = (points[..., :2] + camera[:, None, 1:]) * camera[:, None, :1] * (SIZE / 2)
     return _crop_to_image(crop_xy, window)
 
 
-def image_to_crop(points: Float[Array, "N P 2"], window: Window) -> Float[Array, "N P 2"]:
+def image_to_crop(points: Float[ArrayLike, "N P 2"], window: Window) -> Float[Array, "N P 2"]:
     """Image pixels -> pixels of the 224x224 crop cut with ``window`` (the inverse of its last step)."""
     origin = jnp.asarray(window.origin, jnp.float32)[:, None, :]
     return (points - origin) * window.ratio.astype(jnp.float32)[:, None, None]

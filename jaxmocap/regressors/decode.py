@@ -5,7 +5,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 import smplx_jax
 from jaxmocap.regressors.body import BodyOutput
@@ -19,7 +19,7 @@ _NEGATED[1] = True
 _NEGATED[POSE] = np.tile([False, True, True], 16)
 
 
-def mirror_hand_params(raw: Float[Array, "N 61"]) -> Float[Array, "N 61"]:
+def mirror_hand_params(raw: Float[ArrayLike, "N 61"]) -> Float[Array, "N 61"]:
     """Left <-> right for a left-right flipped crop: negate camera tx and the y, z of every axis-angle (wrist
     included). Its own inverse."""
     return jnp.where(_NEGATED, -raw, raw)
@@ -76,7 +76,8 @@ def body_params(model: smplx_jax.BodyModel, rotmats: Float[Array, "24 3 3"], bet
     """One body's SMPL rotations -> SMPL-X parameters: global orientation and body joints 1..21 (SMPL's hands 22,
     23 dropped), the model's mean hands, zero face and translation."""
     rotvecs = rotmat_to_rotvec(rotmats)
-    zeros = lambda n: jnp.zeros(n, rotvecs.dtype)  # noqa: E731
+    def zeros(n):
+        return jnp.zeros(n, rotvecs.dtype)
     return smplx_jax.SMPLXParams(
         global_orient=rotvecs[0], body_pose=rotvecs[1:22], left_hand_pose=model.hand_mean[0].reshape(15, 3),
         right_hand_pose=model.hand_mean[1].reshape(15, 3), jaw_pose=zeros(3), leye_pose=zeros(3),

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import nnx
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from jaxmocap.batching import map_in_buckets, pad_rows, padded_size
 from jaxmocap.regressors import crops as _crops
@@ -52,12 +52,12 @@ class Predictor:
         """The body regressor split into graph and weights (to fine-tune copies of it: `integrate.eft`)."""
         return self._body
 
-    def hand(self, crops: Float[Array, "N 224 224 3"]) -> Float[Array, "N 61"]:
-        return self._run(self._hand, crops, np.zeros((0, 61), np.float32))
+    def hand(self, crops: Float[ArrayLike, "N 224 224 3"]) -> Float[Array, "N 61"]:
+        return self._run(self._hand, crops, jnp.zeros((0, 61), jnp.float32))
 
-    def body(self, crops: Float[Array, "N 224 224 3"]) -> BodyOutput:
-        empty = BodyOutput(np.zeros((0, 24, 3, 3), np.float32), np.zeros((0, 10), np.float32),
-                           np.zeros((0, 3), np.float32))
+    def body(self, crops: Float[ArrayLike, "N 224 224 3"]) -> BodyOutput:
+        empty = BodyOutput(jnp.zeros((0, 24, 3, 3), jnp.float32), jnp.zeros((0, 10), jnp.float32),
+                           jnp.zeros((0, 3), jnp.float32))
         return self._run(self._body, crops, empty)
 
     def _run(self, split, crops, empty):

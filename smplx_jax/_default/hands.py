@@ -27,7 +27,7 @@ def synthetic_right_poses(n=3000, seed=0):
     poses = np.zeros((n, 15, 3))
     close = rng.beta(1.3, 2.2, n)                       # 0 open .. 1 fist, mostly relaxed
     spread_amt = rng.normal(0.0, 0.12, n) + 0.08 * (1 - close)
-    for i, name in enumerate(_ORDER):
+    for name in _ORDER:
         own = np.clip(close + rng.normal(0, 0.12, n) * (1.0 + 0.5 * (name in ("ring", "pinky"))), -0.1, 1.1)
         base = (0.15 + 0.08 * ("pinky" == name) + 0.05 * (name == "ring"))  # relaxed curl grows to the pinky
         mcp = (base + 1.25 * own)[:, None] * flex + (_SPREAD[name] * spread_amt * (1 - 0.7 * own))[:, None] * spread

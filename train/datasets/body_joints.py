@@ -113,7 +113,7 @@ class BodyLabels(NamedTuple):
 
 
 @dataclass(frozen=True)
-class BodySamples(Sequence[BodySample]):
+class BodySamples(Sequence):  # of BodySample; Sequence[BodySample] would make runtime checkers load one
     """Labels parsed once; each image read when its sample is taken."""
 
     image_paths: tuple[Path, ...]

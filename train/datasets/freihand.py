@@ -13,7 +13,6 @@ which needs the licensed model file to become absolute, so `hand_pose` is NaN; t
 """
 
 import json
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,6 @@ from train.datasets.hand_joints import (
     project,
     require_file,
 )
-from train.datasets.sample import HandSample
 
 SET_NAMES = {"train": "training", "test": "evaluation"}
 VERSIONS = {"training": 4, "evaluation": 1}
@@ -43,7 +41,7 @@ def _load_json_list(path: Path, expected: str) -> list:
     return values
 
 
-def read(root: Path, split: str) -> Sequence[HandSample]:
+def read(root: Path, split: str) -> HandSamples:
     """FreiHAND's `train` (training, all 4 versions) or `test` (evaluation) split."""
     check_split("FreiHAND", split, SET_NAMES)
     set_name = SET_NAMES[split]

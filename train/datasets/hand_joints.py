@@ -5,7 +5,7 @@ OpenPose hand order: wrist, thumb 1-4, index 1-4, middle 1-4, ring 1-4, pinky 1-
 """
 
 import pickle
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,7 +36,7 @@ def project(joints_3d: Float[np.ndarray, "J 3"], camera_matrix: Float[np.ndarray
     return homogeneous[:, :2] / homogeneous[:, 2:]
 
 
-def knuckle_length(joints_3d: Float[np.ndarray, "21 3"]) -> Float[np.ndarray, ""]:
+def knuckle_length(joints_3d: Float[np.ndarray, "21 3"]) -> float:
     """Length of the middle finger's knuckle bone (`KNUCKLE_BONE`)."""
     return np.linalg.norm(joints_3d[KNUCKLE_BONE[1]] - joints_3d[KNUCKLE_BONE[0]])
 
@@ -100,7 +100,7 @@ def hand_labels(
 
 
 @dataclass(frozen=True)
-class HandSamples(Sequence[HandSample]):
+class HandSamples(Sequence):  # of HandSample; Sequence[HandSample] would make runtime checkers load one
     """`HandSample`s whose images are read when indexed; image i has labels `label_index[i]`."""
 
     image_paths: tuple[Path, ...]
@@ -132,7 +132,7 @@ def hand_samples(image_paths: Sequence[Path], labels: HandLabels) -> HandSamples
     return HandSamples(tuple(image_paths), labels, np.arange(len(image_paths)))
 
 
-def check_split(dataset: str, split: str, splits: Sequence[str]) -> None:
+def check_split(dataset: str, split: str, splits: Collection[str]) -> None:
     """Raise ValueError unless `split` is one of `splits`."""
     if split not in splits:
         raise ValueError(f"{dataset}: unknown split {split!r}; expected one of {list(splits)}")
@@ -158,7 +158,7 @@ def load_pickled_dict(path: Path, expected: str) -> dict:
     return values
 
 
-def checked_array(values, shape: tuple[int, ...], source: str, what: str) -> np.ndarray:
+def checked_array(values, shape: tuple[int, ...], source: str | Path, what: str) -> np.ndarray:
     """`values` as a float array of `shape` (-1 = any length), else ValueError naming the source and shapes."""
     try:
         array = np.asarray(values, np.float64)

@@ -11,7 +11,6 @@
 R_cv = diag(1, -1, -1) R_gl. Right hands only. MANO's finger order is SMPL-X's.
 """
 
-from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
@@ -20,6 +19,7 @@ import numpy as np
 from train.datasets.hand_joints import (
     OPENPOSE_FROM_MANO,
     WRIST,
+    HandSamples,
     check_split,
     checked_array,
     hand_labels,
@@ -28,7 +28,6 @@ from train.datasets.hand_joints import (
     project,
     require_file,
 )
-from train.datasets.sample import HandSample
 
 SET_NAMES = {"train": "train", "test": "evaluation"}
 OPENGL_TO_OPENCV = np.diag([1.0, -1.0, -1.0])
@@ -56,7 +55,7 @@ def _image_path(seq_dir: Path, frame: str, suffixes: dict[Path, str]) -> Path:
     return seq_dir / "rgb" / f"{frame}{suffixes[seq_dir]}"
 
 
-def read(root: Path, split: str) -> Sequence[HandSample]:
+def read(root: Path, split: str) -> HandSamples:
     """HO-3D's `train` (fully labelled frames) or `test` (evaluation: wrist and box only) split."""
     check_split("HO-3D", split, SET_NAMES)
     set_name, root = SET_NAMES[split], Path(root)

@@ -8,13 +8,11 @@
 """
 
 import json
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from train.datasets.hand_joints import check_split, checked_array, hand_labels, hand_samples
-from train.datasets.sample import HandSample
+from train.datasets.hand_joints import HandSamples, check_split, checked_array, hand_labels, hand_samples
 
 FOLDERS = {"train": "manual_train", "test": "manual_test"}
 
@@ -32,7 +30,7 @@ def _load_label(path: Path) -> tuple[np.ndarray, bool]:
     return np.where(points[:, 2:] == 1, points[:, :2], np.nan), bool(label["is_left"])
 
 
-def read(root: Path, split: str) -> Sequence[HandSample]:
+def read(root: Path, split: str) -> HandSamples:
     """MPII+NZSL's `train` (manual_train) or `test` (manual_test) hands."""
     check_split("MPII+NZSL", split, FOLDERS)
     folder = Path(root) / "hand_labels" / FOLDERS[split]

@@ -10,26 +10,25 @@ do not become samples. All 21 2D keypoints are labels (exact projections of the 
 box covers them all.
 """
 
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from train.datasets.hand_joints import (
     OPENPOSE_FROM_RHD,
+    HandSamples,
     check_split,
     checked_array,
     hand_labels,
     hand_samples,
     load_pickled_dict,
 )
-from train.datasets.sample import HandSample
 
 SET_NAMES = {"train": "training", "test": "evaluation"}
 EXPECTED = "a pickled dict {sample id: {'uv_vis', 'xyz', 'K'}}"
 
 
-def read(root: Path, split: str) -> Sequence[HandSample]:
+def read(root: Path, split: str) -> HandSamples:
     """RHD's `train` (training) or `test` (evaluation) split, one hand per image."""
     check_split("RHD", split, SET_NAMES)
     set_name, root = SET_NAMES[split], Path(root)

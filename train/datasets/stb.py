@@ -10,7 +10,6 @@ extrinsics (colour = (depth - t) R, R = Rodrigues(r)) and project with the SK co
 becomes a wrist as bihand does: wrist = middle MCP + 2.2 (palm - middle MCP). Left hands only.
 """
 
-from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
@@ -21,6 +20,7 @@ from train.datasets.hand_joints import (
     MIDDLE_MCP,
     OPENPOSE_FROM_STB,
     WRIST,
+    HandSamples,
     check_split,
     checked_array,
     hand_labels,
@@ -28,7 +28,6 @@ from train.datasets.hand_joints import (
     project,
     require_file,
 )
-from train.datasets.sample import HandSample
 
 SEQUENCES = {
     "train": tuple(f"B{i}{kind}" for i in range(2, 7) for kind in ("Counting", "Random")),
@@ -61,7 +60,7 @@ def _load_hand_para(path: Path) -> np.ndarray:
     return checked_array(mat["handPara"], (3, 21, -1), path, "handPara")
 
 
-def read(root: Path, split: str) -> Sequence[HandSample]:
+def read(root: Path, split: str) -> HandSamples:
     """STB's SK colour images: `train` (B2-B6) or `test` (B1)."""
     check_split("STB", split, SEQUENCES)
     root = Path(root)

@@ -144,7 +144,7 @@ def _hand_forward(hand: smplx_jax.HandModel, wrist_rotvec, hand_pose, betas) -> 
     return smplx_jax.hand_forward(hand, rotvec_to_rotmat(wrist_rotvec), hand_pose, betas)
 
 
-class SyntheticHands(Sequence[HandSample]):
+class SyntheticHands(Sequence):  # of HandSample; Sequence[HandSample] would make runtime checkers load one
     """``num`` rendered hands (left or right at random): `HandSample`s with exact labels."""
 
     def __init__(self, num: int, seed: int, *, image_size: int = 256, model: smplx_jax.BodyModel | None = None):
@@ -229,7 +229,7 @@ def _body_forward(model: smplx_jax.BodyModel, global_orient, body_pose, betas):
     return out.vertices, out.joints[jnp.array(constants.BODY25_FROM_SMPLX)]
 
 
-class SyntheticBodies(Sequence[BodySample]):
+class SyntheticBodies(Sequence):  # of BodySample; Sequence[BodySample] would make runtime checkers load one
     """``num`` rendered people: `BodySample`s with exact labels; hands at the model's mean pose."""
 
     def __init__(self, num: int, seed: int, *, image_size: int = 256, model: smplx_jax.BodyModel | None = None):
