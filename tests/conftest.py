@@ -1,5 +1,7 @@
-"""Shared fixtures: model files (random with official shapes, and the default model), loaded once."""
+"""Shared fixtures: model files (random with official shapes, and the default model), loaded once; a run
+interrupted on purpose."""
 
+import contextlib
 import sys
 from pathlib import Path
 
@@ -50,3 +52,24 @@ def load(model_dir: Path) -> smplx_jax.BodyModel:
     if model_dir not in _LOADED:
         _LOADED[model_dir] = smplx_jax.load_model(model_dir / "smplx" / "SMPLX_NEUTRAL.npz")
     return _LOADED[model_dir]
+
+
+@contextlib.contextmanager
+def interrupted_at_chunk(monkeypatch, index: int):
+    """Within the block, ``jaxmocap run`` stops (KeyboardInterrupt, as Ctrl-C) when it comes to solve its chunk
+    number ``index`` (0-based; stored chunks are not solved again)."""
+    import jaxmocap.pipeline.job as job
+
+    solve, calls = job.solve_chunk, []
+
+    def solve_or_stop(*args):
+        calls.append(1)
+        if len(calls) == index + 1:
+            raise KeyboardInterrupt
+        return solve(*args)
+
+    monkeypatch.setattr(job, "solve_chunk", solve_or_stop)
+    try:
+        yield
+    finally:
+        monkeypatch.setattr(job, "solve_chunk", solve)

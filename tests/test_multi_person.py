@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jaxmocap.pipeline.job as pipeline_job
+from conftest import interrupted_at_chunk
 from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from jaxmocap.pipeline import RunConfig
 
@@ -62,18 +63,8 @@ def test_resume_with_several_people(tmp_path, monkeypatch):
     """Interrupted after a chunk, run again: every person's motion as in one go, with the same identities."""
     config = RunConfig(CLIP, end=3 * CHUNK, chunk_size=CHUNK, max_people=3, overlay=False, progress=False)
     whole = pipeline_job.run(config, tmp_path / "whole")
-    solve, calls = pipeline_job.solve_chunk, []
-
-    def interrupted(*args):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return solve(*args)
-
-    monkeypatch.setattr(pipeline_job, "solve_chunk", interrupted)
-    with pytest.raises(KeyboardInterrupt):
+    with interrupted_at_chunk(monkeypatch, 1), pytest.raises(KeyboardInterrupt):
         pipeline_job.run(config, tmp_path / "resumed")
-    monkeypatch.setattr(pipeline_job, "solve_chunk", solve)
     resumed = pipeline_job.run(config, tmp_path / "resumed")
     assert resumed.people == whole.people and len(whole.people) >= 2
     for i in whole.people:

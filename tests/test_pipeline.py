@@ -17,6 +17,7 @@ import torch
 import frankmocap_reference as ref
 import jaxmocap.pipeline.job as pipeline_job
 import smplx_jax
+from conftest import interrupted_at_chunk
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
 from jaxmocap.io import file_sha256
@@ -215,19 +216,9 @@ def test_overlay_and_exports(result):
 
 def test_interrupted_run_resumes_to_the_same_motion(result, tmp_path, monkeypatch):
     out, _ = result
-    solve, calls = pipeline_job.solve_chunk, []
-
-    def interrupted(*args):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return solve(*args)
-
-    monkeypatch.setattr(pipeline_job, "solve_chunk", interrupted)
-    with pytest.raises(KeyboardInterrupt):
+    with interrupted_at_chunk(monkeypatch, 1), pytest.raises(KeyboardInterrupt):
         run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
     assert not (tmp_path / "motion.npz").exists() and len(list((tmp_path / ".jaxmocap_chunks").glob("*.npz"))) == 1
-    monkeypatch.setattr(pipeline_job, "solve_chunk", solve)
     run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
     assert (tmp_path / "motion.npz").read_bytes() == (out / "motion.npz").read_bytes()
 

@@ -64,6 +64,7 @@ def as_bgr(image: np.ndarray) -> np.ndarray:
 class _Track:
     pose: PoseResult
     hands: dict  # side -> HandResult | None
+    seen: int = 2  # frames tracked, 2 for one reported at once; a person is reported once seen in two frames
 
 
 class Detector:
@@ -105,7 +106,8 @@ class Detector:
         """The tracked people as arrays (``np.savez``-able); `restore` continues from them exactly as this
         detector would (a resumed run detects as an uninterrupted one)."""
         hands = [[t.hands.get(side) for side in SIDES] for t in self._tracks]
-        out = {"frame": np.asarray(self._frame), "hand_found": np.asarray(
+        out = {"frame": np.asarray(self._frame), "seen": np.asarray([t.seen for t in self._tracks], np.int64),
+               "hand_found": np.asarray(
             [[h is not None for h in pair] for pair in hands], bool).reshape(-1, 2)}
         for kind, results, empty in (("pose", [t.pose for t in self._tracks], None),
                                      ("hand", [h for pair in hands for h in pair], _NO_HAND)):
@@ -123,8 +125,8 @@ class Detector:
 
         found = state["hand_found"]
         self._tracks = [_Track(result("pose", PoseResult, k), {
-            side: result("hand", HandResult, 2 * k + j) if found[k, j] else None for j, side in enumerate(SIDES)})
-            for k in range(len(found))]
+            side: result("hand", HandResult, 2 * k + j) if found[k, j] else None for j, side in enumerate(SIDES)},
+            int(state["seen"][k])) for k in range(len(found))]
         self._frame = int(state["frame"])
 
     # -- body -------------------------------------------------------------------------------------------------
@@ -161,10 +163,13 @@ class Detector:
             result = self._pose.landmarks(image, track.pose.next_roi, self.min_tracking_confidence)
             if result is None or any(rect_iou(result.next_roi, t.pose.next_roi) > 0.5 for t in tracks):
                 continue
-            tracks.append(_Track(result, track.hands))
+            tracks.append(_Track(result, track.hands, track.seen + 1))
         if not tracks or (len(tracks) < self.max_people and self._frame % self.redetect_every == 0):
             new = self._detect_people(image, [t.pose for t in tracks])
-            tracks += [_Track(p, {s: None for s in SIDES}) for p in new]
+            # the first person of a stream is reported at once; anyone found beside others once seen again (a
+            # detection that does not survive one frame of tracking is a false one, often a part of someone)
+            tracks += [_Track(p, {s: None for s in SIDES}, 2 if not tracks and k == 0 else 1)
+                       for k, p in enumerate(new)]
         return tracks
 
     # -- hands ------------------------------------------------------------------------------------------------
@@ -247,7 +252,7 @@ class Detector:
             self._tracks = tracks
             self._frame += 1
         size = (image.shape[1], image.shape[0])
-        return [_person(t, size) for t in tracks]
+        return [_person(t, size) for t in tracks if t.seen >= 2]
 
 
 def _person(track: _Track, size: tuple[int, int]) -> Person:
