@@ -62,7 +62,7 @@ def people_over_frame(frame: np.ndarray, people: list[Posed], faces: np.ndarray,
     image = cv2.resize(frame, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale != 1 else frame
     if not people:
         return image.copy()
-    unit = np.median(np.concatenate([p.vertices[:, 2] for p in people]))
+    unit = float(np.median(np.concatenate([p.vertices[:, 2] for p in people])))
     points = [mesh_pixels(p.vertices, p.camera_scale, p.camera_trans, focal_length, principal_point, unit) * scale
               for p in people]
     drawn = draw_mesh(image, *_joined(points, faces, [person_colour(p.person_id) for p in people]), opacity=0.75)
@@ -120,7 +120,7 @@ class OverlayWriter:
     Frames are composed in parallel threads (the rasteriser's numpy work releases the GIL)."""
 
     def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, faces: np.ndarray,
-                 max_height: int = 960, lens: tuple = (None, None), up: np.ndarray | None = None):
+                 max_height: int = 720, lens: tuple = (None, None), up: np.ndarray | None = None):
         width, height = frame_size
         self.faces = np.asarray(faces)
         self.lens = lens  # (focal_length, principal_point) of a pinhole camera, or (None, None)

@@ -8,7 +8,7 @@ import numpy as np
 
 import smplx_jax
 from conftest import load
-from jaxmocap.overlay import OverlayWriter, Posed, body_up, mesh_over_frame, upright
+from jaxmocap.overlay import OverlayWriter, Posed, body_up, mesh_over_frame, people_over_frame, person_colour, upright
 from jaxmocap.poses import example_pose
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -74,5 +74,36 @@ def test_overlay_video_frames_and_size(default_model_dir, tmp_path):
     video = cv2.VideoCapture(str(path))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
     ok, first = video.read()
-    assert ok and first.shape == (960, 1080, 3)
+    assert ok and first.shape == (720, 810, 3)
     cv2.imwrite(str(tmp_path / "first.png"), first)
+
+
+def test_people_are_drawn_in_their_colours_with_their_ids(default_model_dir):
+    """Two people side by side: each one's pixels in the colour of their identity (shaded), the nearer one hiding
+    the farther where they overlap, and an id label above each."""
+    model = load(default_model_dir)
+    vertices, _ = _posed(model)
+    faces = np.asarray(model.faces)
+    frame = np.zeros((400, 600, 3), np.uint8)
+    people = [Posed(0, vertices + [-0.5, 0.0, 3.0], 1.0, np.zeros(2)), Posed(3, vertices + [0.5, 0.0, 3.0], 1.0,
+                                                                            np.zeros(2))]
+    drawn = people_over_frame(frame, people, faces, 1.0, 300.0, np.array([300.0, 200.0]), labels=False)
+    for person, half in zip(people, (drawn[:, :300], drawn[:, 300:])):
+        assert _share_of_colour(half[half.max(axis=2) > 0], person.person_id) > 0.9
+    assert person_colour(0) != person_colour(3)
+    labelled = people_over_frame(frame, people, faces, 1.0, 300.0, np.array([300.0, 200.0]))
+    assert (labelled != drawn).any()  # the ids above the heads
+    front = [Posed(0, vertices + [0.0, 0.0, 3.0], 1.0, np.zeros(2)), Posed(1, vertices + [0.0, 0.0, 4.0], 1.0,
+                                                                          np.zeros(2))]
+    both = people_over_frame(frame, front, faces, 1.0, 300.0, np.array([300.0, 200.0]), labels=False)
+    alone = people_over_frame(frame, front[:1], faces, 1.0, 300.0, np.array([300.0, 200.0]), labels=False)
+    inside = alone.max(axis=2) > 0
+    assert _share_of_colour(both[inside], 0) > 0.9  # the nearer one hides the one behind
+
+
+def _share_of_colour(pixels: np.ndarray, person_id: int) -> float:
+    """The share of ``pixels`` (N, 3) in the hue of ``person_id``'s colour (any shade of it)."""
+    colour = np.asarray(person_colour(person_id), float)
+    pixels = pixels.astype(float)
+    cosine = pixels @ colour / (np.linalg.norm(pixels, axis=1) * np.linalg.norm(colour) + 1e-9)
+    return float(np.mean(cosine > 0.995)) if len(pixels) > 1000 else 0.0
