@@ -15,6 +15,12 @@ from .roi import Rect
 from .ssd import Detection, in_image, square_tiles
 
 SIDES = ("left", "right")
+SEARCH_SECONDS = 0.2  # while fewer than max_people are tracked, the person detector looks for more this often
+
+
+def search_interval(fps: float | None) -> int:
+    """Frames between searches for more people in a video of ``fps`` frames/s (6 when unknown)."""
+    return max(1, int(SEARCH_SECONDS * fps)) if fps else 6
 _NO_HAND = HandResult(np.zeros((21, 3)), np.zeros((21, 3)), 0.0, 0.0, Rect(0, 0, 0, 0), Rect(0, 0, 0, 0))
 
 
@@ -72,8 +78,8 @@ class Detector:
 
     ``static_image_mode=True`` treats every call as an unrelated image (person and palm detectors each time);
     ``False`` tracks: the next ROIs come from the previous frame's landmarks, the person detector runs only when
-    a track is lost (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked: someone who
-    comes in is found within 0.25 s at 24 frames/s or more), and each
+    a track is lost (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked; for a video,
+    `search_interval` of its frame rate, so that someone who comes in is found within a quarter second), and each
     hand comes, as in mediapipe's holistic, from the ROI that the body's wrist, pinky and index give, refined by
     the recrop model, or from the previous frame's hand while that stays close to it.
     Model files: see ``jaxmocap.detect.models`` (``model_dir`` or ``$JAXMOCAP_MEDIAPIPE_DIR`` to use a copy).
@@ -148,10 +154,11 @@ class Detector:
             if len(found) >= self.max_people:
                 break
             roi = self._pose.detection_roi(det, size)
-            if any(rect_iou(roi, p.roi) > 0.5 or rect_iou(roi, p.next_roi) > 0.5 for p in found):
+            if any(rect_iou(roi, p.roi) > 0.5 or rect_iou(roi, p.next_roi) > 0.5 or _at_hips(det, p, size)
+                   for p in found):
                 continue
             result = self._pose.landmarks(image, roi, self.min_tracking_confidence)
-            if result is not None and not any(rect_iou(result.next_roi, p.next_roi) > 0.5 for p in found):
+            if result is not None and not any(_same_person(result, p, size) for p in found):
                 found.append(result)
         return found[len(known):]
 
@@ -253,6 +260,30 @@ class Detector:
             self._frame += 1
         size = (image.shape[1], image.shape[0])
         return [_person(t, size) for t in tracks if t.seen >= 2]
+
+
+def _same_person(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
+    """Whether a person just found is one already known: their tracking rects overlap (IoU above 0.5), or the new
+    one is a part of the known one taken for a small whole person (less than half as tall, and for the most part
+    within the known one's rect)."""
+    if rect_iou(new.next_roi, known.next_roi) > 0.5:
+        return True
+    x0, y0, x1, y1 = landmark_box(new.landmarks, size)
+    tall = landmark_box(known.landmarks, size)
+    w, h = size
+    r = known.next_roi
+    inside_x = max(0.0, min(x1, (r.x_center + r.width / 2) * w) - max(x0, (r.x_center - r.width / 2) * w))
+    inside_y = max(0.0, min(y1, (r.y_center + r.height / 2) * h) - max(y0, (r.y_center - r.height / 2) * h))
+    area = max((x1 - x0) * (y1 - y0), 1e-9)
+    return bool(y1 - y0 < 0.5 * (tall[3] - tall[1]) and inside_x * inside_y > 0.8 * area)
+
+
+def _at_hips(det: Detection, known: PoseResult, size: tuple[int, int]) -> bool:
+    """Whether a person detection's centre (its mid-hip keypoint) lies within half a torso of a known person's
+    mid-hip: the same person again (seen whole or, on a square of the image, in part)."""
+    scale = np.asarray(size, np.float64)
+    hips, shoulders = (known.landmarks[list(ids), :2].mean(axis=0) * scale for ids in ((23, 24), (11, 12)))
+    return bool(np.linalg.norm(det.keypoints[0] * scale - hips) < 0.5 * np.linalg.norm(shoulders - hips))
 
 
 def _person(track: _Track, size: tuple[int, int]) -> Person:

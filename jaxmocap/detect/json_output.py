@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from ..frame_source import MediaError, open_media
-from .detector import Detector, Person, as_bgr
+from .detector import Detector, Person, as_bgr, search_interval
 from .draw import draw_openpose
 from .identities import IdentityTracker, identify
 from .openpose import body25_from_blazepose, hand21, json_name, write_openpose_json
@@ -45,7 +45,8 @@ def detect_media(input: str | os.PathLike, out_dir: str | os.PathLike, overlay: 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     still = media.kind in ("image", "images")
-    detector = Detector(static_image_mode=still, max_people=max_people, hands=hands, model_dir=model_dir)
+    detector = Detector(static_image_mode=still, max_people=max_people, hands=hands, model_dir=model_dir,
+                        redetect_every=search_interval(media.fps))
     tracker = None if still else IdentityTracker()
     written: list[Path] = []
     writer = None

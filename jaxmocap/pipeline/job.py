@@ -19,6 +19,7 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.detect import Detector
+from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.frame_source import Media, open_media
 from jaxmocap.io import file_sha256
@@ -124,7 +125,8 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
 
     still = inputs.media.kind in ("image", "images")
     detector = Detector(static_image_mode=still, hands=config.hand_boxes == "keypoints",
-                        max_people=1 if config.keypoints else config.max_people)
+                        max_people=1 if config.keypoints else config.max_people,
+                        redetect_every=search_interval(inputs.media.fps))
     tracker = None if still else IdentityTracker()
     done = 0
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
