@@ -120,7 +120,7 @@ class OverlayWriter:
     Frames are composed in parallel threads (the rasteriser's numpy work releases the GIL)."""
 
     def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, faces: np.ndarray,
-                 max_height: int = 720, lens: tuple = (None, None), up: np.ndarray | None = None):
+                 max_height: int = 960, lens: tuple = (None, None), up: np.ndarray | None = None):
         width, height = frame_size
         self.faces = np.asarray(faces)
         self.lens = lens  # (focal_length, principal_point) of a pinhole camera, or (None, None)

@@ -74,7 +74,7 @@ def test_overlay_video_frames_and_size(default_model_dir, tmp_path):
     video = cv2.VideoCapture(str(path))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
     ok, first = video.read()
-    assert ok and first.shape == (720, 810, 3)
+    assert ok and first.shape == (960, 1080, 3)
     cv2.imwrite(str(tmp_path / "first.png"), first)
 
 

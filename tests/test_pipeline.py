@@ -204,7 +204,7 @@ def test_overlay_and_exports(result):
     video = cv2.VideoCapture(str(out / "overlay.mp4"))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == FRAMES
     ok, frame = video.read()
-    assert ok and frame.shape == (720, 810, 3)
+    assert ok and frame.shape == (960, 1080, 3)
     text = (out / "motion.bvh").read_text()
     assert f"Frames: {FRAMES}" in text and text.count("JOINT") == 54
     data = (out / "motion.glb").read_bytes()
