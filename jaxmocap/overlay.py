@@ -116,12 +116,15 @@ def side_view(people: list[Posed], faces: np.ndarray, size: tuple[int, int], pix
 
 class OverlayWriter:
     """Writes the side-by-side overlay video (``mp4v``) of the people in each frame, the frames scaled so that the
-    height is at most ``max_height``; the side view keeps the first frame's scale and follows the people's centre.
+    height is at most ``max_height``; the side view keeps the first frame's scale (a body and the people's
+    ``spread``) and follows the people's centre.
     Frames are composed in parallel threads (the rasteriser's numpy work releases the GIL)."""
 
     def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, faces: np.ndarray,
-                 max_height: int = 960, lens: tuple = (None, None), up: np.ndarray | None = None):
+                 max_height: int = 960, lens: tuple = (None, None), up: np.ndarray | None = None,
+                 spread: float = 0.0):
         width, height = frame_size
+        self.spread = spread  # metres between the people, at most: the side view's scale leaves room for it
         self.faces = np.asarray(faces)
         self.lens = lens  # (focal_length, principal_point) of a pinhole camera, or (None, None)
         self.up = up  # the side view's vertical in the camera frame (`body_up`)
@@ -146,7 +149,8 @@ class OverlayWriter:
         everyone = np.concatenate([p.vertices for p in people])
         lo, hi = everyone.min(axis=0), everyone.max(axis=0)
         if self.pixels_per_metre is None:
-            self.pixels_per_metre = float(0.75 * self.panel[1] / (hi - lo).max())
+            tallest = max(float((p.vertices.max(axis=0) - p.vertices.min(axis=0)).max()) for p in people)
+            self.pixels_per_metre = 0.75 * self.panel[1] / (tallest + self.spread)
         right = side_view(list(people), self.faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up)
         return np.concatenate([left, right], axis=1)
 

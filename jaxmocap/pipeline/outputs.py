@@ -34,7 +34,7 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dic
     orients = [m["global_orient"][m["valid"]] for m in motions.values()]
     up = body_up(np.concatenate(orients)) if sum(map(len, orients)) else None
     lenses = lens(next(iter(motions.values()))) if motions else (None, None)
-    with OverlayWriter(path, image_size, media.fps, faces, lens=lenses, up=up) as writer, \
+    with OverlayWriter(path, image_size, media.fps, faces, lens=lenses, up=up, spread=_spread(motions)) as writer, \
             tqdm(total=total, unit="frame", desc="overlay", disable=not config.progress) as bar:
         for start in range(0, total, _BATCH):
             batch = [frame for _, (_, frame) in zip(range(min(_BATCH, total - start)), frames)]
@@ -51,6 +51,16 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dic
             writer.write(*zip(batch, people))
             bar.update(len(batch))
     return Path(path)
+
+
+def _spread(motions: dict[int, dict]) -> float:
+    """The most the people of one frame are apart (metres, in depth or height: the side view's axes)."""
+    if len(motions) < 2:
+        return 0.0
+    transl = np.stack([m["transl"] for m in motions.values()])  # (P, T, 3)
+    valid = np.stack([m["valid"] for m in motions.values()])[..., None]
+    lo, hi = np.where(valid, transl, np.inf).min(axis=0), np.where(valid, transl, -np.inf).max(axis=0)
+    return float(np.nan_to_num(hi - lo, neginf=0.0)[:, 1:].max(initial=0.0))
 
 
 def write_exports(out_dir: Path, model: smplx_jax.BodyModel, motion: dict, formats) -> list[Path]:
