@@ -119,8 +119,8 @@ def whole_tracks(chunks: list[Chunk], model: smplx_jax.BodyModel) -> dict[int, T
 def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir: Path, chrono: Chrono
                   ) -> Iterator[Chunk]:
     """Each chunk of frames, from the store if it holds it, else through the per-chunk stages (`solve_chunk`),
-    then stored and its detections written as OpenPose JSON. Identities carry on from chunk to chunk (in a
-    video); the detector starts afresh in each."""
+    then stored and its detections written as OpenPose JSON. The detector's tracks and the identities carry on
+    from chunk to chunk (in a video), restored from a stored chunk's."""
     from tqdm import tqdm
 
     still = inputs.media.kind in ("image", "images")
