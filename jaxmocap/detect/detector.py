@@ -10,7 +10,7 @@ import numpy as np
 from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models
-from .pose import PoseEstimator, PoseResult, landmark_box, rect_iou
+from .pose import PoseEstimator, PoseResult, landmark_box, overlap, rect_extent, rect_iou
 from .roi import Rect
 from .ssd import Detection, in_image, square_tiles
 
@@ -268,14 +268,11 @@ def _same_person(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> b
     within the known one's rect)."""
     if rect_iou(new.next_roi, known.next_roi) > 0.5:
         return True
-    x0, y0, x1, y1 = landmark_box(new.landmarks, size)
+    x0, y0, x1, y1 = box = landmark_box(new.landmarks, size)
     tall = landmark_box(known.landmarks, size)
-    w, h = size
-    r = known.next_roi
-    inside_x = max(0.0, min(x1, (r.x_center + r.width / 2) * w) - max(x0, (r.x_center - r.width / 2) * w))
-    inside_y = max(0.0, min(y1, (r.y_center + r.height / 2) * h) - max(y0, (r.y_center - r.height / 2) * h))
+    rect = np.asarray(rect_extent(known.next_roi)) * np.tile(size, 2)
     area = max((x1 - x0) * (y1 - y0), 1e-9)
-    return bool(y1 - y0 < 0.5 * (tall[3] - tall[1]) and inside_x * inside_y > 0.8 * area)
+    return bool(y1 - y0 < 0.5 * (tall[3] - tall[1]) and overlap(box, rect) > 0.8 * area)
 
 
 def _at_hips(det: Detection, known: PoseResult, size: tuple[int, int]) -> bool:

@@ -58,9 +58,7 @@ def identify(tracker: "IdentityTracker | None", image: np.ndarray, people: list)
 
 def landmark_distance(track: Track, landmarks: np.ndarray, frame: int) -> float:
     """Mean distance, in the track's heights, of the landmarks seen in both from where the track expects them."""
-    both = (track.landmarks[:, 2] >= MIN_VISIBILITY) & (landmarks[:, 2] >= MIN_VISIBILITY)
-    if both.sum() < 4:
-        both = np.ones(len(landmarks), bool)
+    both = _seen_in_both(track.landmarks, landmarks)
     expected = track.landmarks[both, :2] + track.velocity * (frame - track.last_seen)
     return float(np.linalg.norm(expected - landmarks[both, :2], axis=1).mean() / max(track.height, 1.0))
 
@@ -124,6 +122,12 @@ class IdentityTracker:
         self.frame, self.next_id = int(state["frame"]), int(state["next_id"])
 
 
+def _seen_in_both(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The landmarks visible in both ``a`` and ``b`` (K, 3); all of them when fewer than four are."""
+    both = (a[:, 2] >= MIN_VISIBILITY) & (b[:, 2] >= MIN_VISIBILITY)
+    return both if both.sum() >= 4 else np.ones(len(b), bool)
+
+
 def _scalar(value):
     return value.item() if np.ndim(value) == 0 else value
 
@@ -141,8 +145,7 @@ def _new_track(track_id: int, landmarks: np.ndarray, look: np.ndarray, frame: in
 
 def _updated(track: Track, landmarks: np.ndarray, look: np.ndarray, frame: int) -> Track:
     """The track after seeing its person at ``frame``: velocity and height smoothed, appearance a running mean."""
-    seen = (track.landmarks[:, 2] >= MIN_VISIBILITY) & (landmarks[:, 2] >= MIN_VISIBILITY)
-    seen = seen if seen.sum() >= 4 else np.ones(len(landmarks), bool)
+    seen = _seen_in_both(track.landmarks, landmarks)
     step = (landmarks[seen, :2].mean(0) - track.landmarks[seen, :2].mean(0)) / (frame - track.last_seen)
     velocity = step if track.seen == 1 else 0.5 * track.velocity + 0.5 * step
     height = 0.8 * track.height + 0.2 * max(_height(landmarks), 1.0)

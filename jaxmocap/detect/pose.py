@@ -107,14 +107,19 @@ class PoseEstimator:
         return PoseResult(image_lm[:33], world, presence, roi, next_roi)
 
 
+def rect_extent(r: Rect) -> tuple[float, float, float, float]:
+    """The axis-aligned extent (x0, y0, x1, y1) of a rect, normalized units, its rotation left out."""
+    return r.x_center - r.width / 2, r.y_center - r.height / 2, r.x_center + r.width / 2, r.y_center + r.height / 2
+
+
+def overlap(a, b) -> float:
+    """The area two boxes (x0, y0, x1, y1) have in common."""
+    return max(0.0, min(a[2], b[2]) - max(a[0], b[0])) * max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+
+
 def rect_iou(a: Rect, b: Rect) -> float:
     """IoU of the axis-aligned extents of two rects (normalized units); used to drop duplicate people."""
-    def extent(r):
-        return r.x_center - r.width / 2, r.y_center - r.height / 2, r.x_center + r.width / 2, r.y_center + r.height / 2
-    ax0, ay0, ax1, ay1 = extent(a)
-    bx0, by0, bx1, by1 = extent(b)
-    iw, ih = max(0.0, min(ax1, bx1) - max(ax0, bx0)), max(0.0, min(ay1, by1) - max(ay0, by0))
-    inter = iw * ih
+    inter = overlap(rect_extent(a), rect_extent(b))
     union = a.width * a.height + b.width * b.height - inter
     return inter / union if union > 0 else 0.0
 
