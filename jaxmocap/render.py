@@ -8,7 +8,8 @@ import numpy as np
 
 from smplx_jax.geometry import face_normals
 
-_LIGHT = np.array([-0.35, -0.45, -0.82]) / np.linalg.norm([-0.35, -0.45, -0.82])  # towards the light: up-left-front
+_LIGHT = np.array([-0.35, -0.45, -0.82], np.float32)  # towards the light: up-left-front
+_LIGHT /= np.linalg.norm(_LIGHT)
 
 
 def rasterize(points: np.ndarray, faces: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -18,29 +19,31 @@ def rasterize(points: np.ndarray, faces: np.ndarray, size: tuple[int, int]) -> n
     algorithm, evaluated for all covered pixels at once.
     """
     width, height = size
-    tri = points[faces].astype(np.float32)
-    xy = tri[:, :, :2] - 0.5  # pixel centres at integer coordinates
-    e1, e2 = xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]
-    area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]  # < 0: facing the viewer (y down)
-    lo = np.maximum(np.ceil(xy.min(axis=1)), 0).astype(np.int32)
-    hi = np.minimum(np.floor(xy.max(axis=1)), [width - 1, height - 1]).astype(np.int32)
-    keep = np.flatnonzero((area < 0) & np.all(hi >= lo, axis=1))
-    keep = keep[np.argsort(-tri[keep, :, 2].mean(axis=1), kind="stable")]
-    extent = hi[keep] - lo[keep] + 1
-    count = extent[:, 0] * extent[:, 1]
-    # one row per candidate pixel, gathered from per-triangle tables (in drawing order)
+    tri = points.astype(np.float32)[faces]
+    x, y = tri[:, :, 0] - 0.5, tri[:, :, 1] - 0.5  # (F, 3) each; pixel centres at integer coordinates
+    ax, ay, bx, by = x[:, 1] - x[:, 0], y[:, 1] - y[:, 0], x[:, 2] - x[:, 0], y[:, 2] - y[:, 0]
+    area = ax * by - ay * bx  # < 0: facing the viewer (y down)
+    x0 = np.maximum(np.ceil(np.minimum(np.minimum(x[:, 0], x[:, 1]), x[:, 2])), 0).astype(np.int32)
+    y0 = np.maximum(np.ceil(np.minimum(np.minimum(y[:, 0], y[:, 1]), y[:, 2])), 0).astype(np.int32)
+    x1 = np.minimum(np.floor(np.maximum(np.maximum(x[:, 0], x[:, 1]), x[:, 2])), width - 1).astype(np.int32)
+    y1 = np.minimum(np.floor(np.maximum(np.maximum(y[:, 0], y[:, 1]), y[:, 2])), height - 1).astype(np.int32)
+    keep = np.flatnonzero((area < 0) & (x1 >= x0) & (y1 >= y0))
+    keep = keep[np.argsort(-(tri[keep, 0, 2] + tri[keep, 1, 2] + tri[keep, 2, 2]), kind="stable")]
+    wide = x1[keep] - x0[keep] + 1
+    count = wide * (y1[keep] - y0[keep] + 1)
+    # one row per candidate pixel of each triangle's bounding box, in drawing order (1-D gathers only: fast)
     k = np.repeat(np.arange(len(keep), dtype=np.int32), count)
-    ints = np.stack([np.cumsum(count) - count, extent[:, 0], lo[keep, 0], lo[keep, 1]], axis=1).astype(np.int32)[k]
-    inv = 1.0 / area[keep, None]
-    floats = np.concatenate([xy[keep, 0], e1[keep] * inv, e2[keep] * inv], axis=1)[k]
-    local = np.arange(len(k), dtype=np.int32) - ints[:, 0]
-    px, py = ints[:, 2] + local % ints[:, 1], ints[:, 3] + local // ints[:, 1]
-    rx, ry = px - floats[:, 0], py - floats[:, 1]
-    w1 = rx * floats[:, 5] - ry * floats[:, 4]
-    w2 = ry * floats[:, 2] - rx * floats[:, 3]
+    local = np.arange(len(k), dtype=np.int32) - (np.cumsum(count, dtype=np.int32) - count)[k]
+    w = wide[k]
+    f = keep[k]
+    px, py = x0[f] + local % w, y0[f] + local // w
+    rx, ry = px - x[f, 0], py - y[f, 0]
+    inv = 1.0 / area[f]
+    w1 = (rx * by[f] - ry * bx[f]) * inv
+    w2 = (ry * ax[f] - rx * ay[f]) * inv
     inside = (w1 >= 0) & (w2 >= 0) & (w1 + w2 <= 1)
     ids = np.full(height * width, -1, np.int32)
-    ids[(py * width + px)[inside]] = keep[k[inside]]  # later (nearer) triangles overwrite
+    ids[(py * width + px)[inside]] = f[inside]  # later (nearer) triangles overwrite
     return ids.reshape(height, width)
 
 
@@ -59,13 +62,15 @@ def draw_mesh(image: np.ndarray, points: np.ndarray, faces: np.ndarray, color=(1
     ``points (V, 3)``: pixel x, pixel y, depth; ``faces (F, 3)`` counter-clockwise seen from outside; ``color``
     one BGR colour, or one per face ``(F, 3)`` (several meshes drawn as one, each hiding the others).
     """
-    ids = rasterize(points, faces, (image.shape[1], image.shape[0]))
-    shade = face_shading(points, faces, _LIGHT, 0.3)
-    covered = ids >= 0
+    ids = rasterize(points, faces, (image.shape[1], image.shape[0])).ravel()
+    covered = np.flatnonzero(ids >= 0)
+    seen = ids[covered]
+    shade = face_shading(points.astype(np.float32), faces, _LIGHT, 0.3)[seen, None]
+    color = np.asarray(color, np.float32)
     out = image.copy()
-    color = np.asarray(color, np.float64)
-    mesh = shade[ids[covered], None] * (color[ids[covered]] if color.ndim == 2 else color)
-    out[covered] = np.clip(opacity * mesh + (1 - opacity) * out[covered], 0, 255).astype(np.uint8)
+    pixels = out.reshape(-1, 3)
+    mesh = shade * (color[seen] if color.ndim == 2 else color)
+    pixels[covered] = np.clip(opacity * mesh + (1 - opacity) * pixels[covered], 0, 255).astype(np.uint8)
     return out
 
 
