@@ -53,6 +53,28 @@ def _cmd_demo(args):
     _print_report(demo(args.out, frankmocap_pkl=args.frankmocap_pkl))
 
 
+def _cmd_live(args):
+    from jaxmocap.live import LiveConfig, live
+    from jaxmocap.live.stream import parse_address
+
+    try:
+        udp = None if args.udp is None else parse_address(args.udp)
+    except ValueError as err:
+        raise InputError(f"--udp: {err}") from None
+    config = LiveConfig(args.source, realtime=args.realtime, loops=args.loops, max_people=args.max_people,
+                        serve=args.serve, host=args.host, udp=udp, record=args.record, model=args.model,
+                        focal_length=args.focal_length, max_frames=args.frames, progress=not args.quiet)
+
+    def started(port):
+        where = f"; watch at http://{args.host}:{port}/" if port is not None else ""
+        print(f"live: capturing {args.source}{where} (Ctrl-C stops)", file=sys.stderr, flush=True)
+
+    report = live(config, started)
+    print(report.summary())
+    for path in report.written:
+        print(f"wrote {path}")
+
+
 def _cmd_detect(args):
     from jaxmocap.detect import detect_media
 
@@ -132,6 +154,27 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_run)
 
+    p = commands.add_parser("live", help="webcam, stream or file -> SMPL-X frame by frame, on a web page and over UDP")
+    p.add_argument("source", help="webcam index (0), stream URL, or video file")
+    p.add_argument("--realtime", action="store_true",
+                   help="play a file at its own frame rate, as if live (frames dropped when behind)")
+    p.add_argument("--loop", dest="loops", type=int, default=1, metavar="N",
+                   help="play a file N times, 0 for ever (default: %(default)s)")
+    p.add_argument("--serve", type=int, default=None, metavar="PORT", help="show the overlay on a web page at PORT")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address the page listens on (default: %(default)s, this machine only)")
+    p.add_argument("--udp", default=None, metavar="HOST:PORT",
+                   help="send each frame's SMPL-X parameters as a JSON line (docs/formats.md, \"Live stream\")")
+    p.add_argument("--record", type=Path, default=None, metavar="DIR",
+                   help="write DIR/motion.npz (and DIR/people/<id>/motion.npz) at the end")
+    p.add_argument("--max-people", type=int, default=1, metavar="N", help="people tracked at most (default: 1)")
+    p.add_argument("--frames", type=int, default=None, metavar="N", help="stop after N frames solved")
+    p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
+    p.add_argument("--focal-length", type=float, default=None, metavar="PX",
+                   help="the camera's focal length in pixels (default: 0.75 x the long side)")
+    p.add_argument("--quiet", action="store_true", help="no live status line")
+    p.set_defaults(run=_cmd_live)
+
     p = commands.add_parser("detect", help="2D keypoints (BODY_25 + hands) as OpenPose JSON, one file per frame")
     p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, required=True, help="output folder for the JSON files")
@@ -209,7 +252,7 @@ def main(argv=None) -> int:
     except (InputError, ModelFileError, OSError) as err:
         print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # `live` stops on Ctrl-C by itself; elsewhere it interrupts
         resume = "; run the same command again to resume" if args.command in ("run", "demo") else ""
         print(f"jaxmocap {args.command}: interrupted{resume}", file=sys.stderr)
         return 130

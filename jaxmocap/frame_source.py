@@ -41,7 +41,10 @@ def read_image(path) -> np.ndarray:
     return image
 
 
-def _capture(source) -> cv2.VideoCapture:
+def capture(source) -> cv2.VideoCapture:
+    """An opened `cv2.VideoCapture` of a webcam index, a stream URL or a video file, or `MediaError`."""
+    if not str(source).isdigit() and "://" not in str(source) and not Path(source).exists():
+        raise MediaError(f"input {source} does not exist")
     cap = cv2.VideoCapture(int(source)) if str(source).isdigit() else cv2.VideoCapture(str(source))
     if not cap.isOpened():
         what = f"webcam {source}" if str(source).isdigit() else f"{source} as a video or image"
@@ -100,7 +103,7 @@ def open_media(source, start: int = 0, end: int | None = None, stride: int = 1) 
     if start < 0 or stride < 1 or (end is not None and end <= start):
         raise MediaError(f"bad frame range start={start} end={end} stride={stride}")
     if str(source).isdigit():
-        cap = _capture(source)
+        cap = capture(source)
         fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0) or 30.0
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         return Media("webcam", f"webcam{source}", fps / stride, size, None), _video(cap, start, end, stride)
@@ -118,7 +121,7 @@ def open_media(source, start: int = 0, end: int | None = None, stride: int = 1) 
                       tuple(f.stem for f in files), tuple(files))
         return media, ((start + i * stride, read_image(f)) for i, f in enumerate(files))
 
-    cap = _capture(path)
+    cap = capture(path)
     total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
     fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0) or 30.0
     frames = _video(cap, start, end, stride)

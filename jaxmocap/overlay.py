@@ -59,7 +59,7 @@ def people_over_frame(frame: np.ndarray, people: list[Posed], faces: np.ndarray,
                       labels: bool = True) -> np.ndarray:
     """The frame (resized by ``scale``) with each person's mesh drawn in their colour, nearer ones hiding farther
     ones, and (``labels``) their identity above their head."""
-    image = cv2.resize(frame, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale != 1 else frame
+    image = shrunk(frame, scale) if scale != 1 else frame
     if not people:
         return image.copy()
     unit = float(np.median(np.concatenate([p.vertices[:, 2] for p in people])))
@@ -71,6 +71,15 @@ def people_over_frame(frame: np.ndarray, people: list[Posed], faces: np.ndarray,
         cv2.putText(drawn, str(person.person_id), (int(top[0]) - 10, int(top[1]) - 12), cv2.FONT_HERSHEY_SIMPLEX,
                     1.2, person_colour(person.person_id), 3, cv2.LINE_AA)
     return drawn
+
+
+def shrunk(frame: np.ndarray, scale: float) -> np.ndarray:
+    """The frame resized by ``scale``, averaged over pixel areas; far below half size first thinned to twice the
+    size by nearest neighbours (OpenCV's area resize is ~15 times slower at a factor that does not divide)."""
+    if scale < 0.5:
+        twice = (round(frame.shape[1] * 2 * scale), round(frame.shape[0] * 2 * scale))
+        frame, scale = cv2.resize(frame, twice, interpolation=cv2.INTER_NEAREST), 0.5
+    return cv2.resize(frame, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
 
 
 def _joined(points: list[np.ndarray], faces: np.ndarray, colours: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

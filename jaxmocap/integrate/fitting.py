@@ -76,8 +76,9 @@ def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
     return jnp.asarray(theta, dtype)
 
 
-def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig) -> FitResult:
-    """One frame from its full pose ``(55, 3)``; ``camera`` (3,) or None (fitted to the start); ``lens``:
+def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig) -> FitResult:
+    """`fit_frame` of one frame from its full pose ``(55, 3)`` with its keypoint model ``km`` made beforehand
+    (`openpose_keypoint_model`); ``camera`` (3,) or None (fitted to the start); ``lens`` (`lens_arrays`):
     (1 / focal length, principal point), 1 / focal length 0 for weak perspective."""
     dtype = pose.dtype
     inv_focal, center = lens
@@ -123,8 +124,8 @@ def _fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fi
                      jnp.where(keep, solution.state.num_accepted_steps - 1, 0))
 
 
-def _lens(focal_length, principal_point, dtype):
-    """``(1 / focal length, principal point)``; zeros for weak perspective."""
+def lens_arrays(focal_length, principal_point, dtype):
+    """`fit_one`'s ``lens``: ``(1 / focal length, principal point)``; zeros for weak perspective."""
     if focal_length is None:
         return jnp.zeros((), dtype), jnp.zeros(2, dtype)
     if principal_point is None:
@@ -145,12 +146,13 @@ def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXPara
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
     km = openpose_keypoint_model(model)
     pose = init.full_pose()
-    return _fit_one(km, keypoints, pose, init.betas, camera, _lens(focal_length, principal_point, pose.dtype), config)
+    lens = lens_arrays(focal_length, principal_point, pose.dtype)
+    return fit_one(km, keypoints, pose, init.betas, camera, lens, config)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
 def _fit_batch(km, keypoints, pose, betas, camera, lens, config: FitConfig):
-    one = functools.partial(_fit_one, config=config)
+    one = functools.partial(fit_one, config=config)
     return jax.vmap(one, in_axes=(None, 0, 0, 0, None if camera is None else 0, None))(km, keypoints, pose, betas,
                                                                                        camera, lens)
 
@@ -200,7 +202,7 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
         camera = np.concatenate([_check("camera_scale", camera_scale, (t,), dtype)[:, None],
                                  _check("camera_trans", camera_trans, (t, 2), dtype)], axis=1)
     km = openpose_keypoint_model(model)
-    lens = _lens(focal_length, principal_point, dtype)
+    lens = lens_arrays(focal_length, principal_point, dtype)
 
     def fit_chunk(frames, n):
         kp, *rest = frames

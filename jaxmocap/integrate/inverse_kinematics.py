@@ -30,6 +30,19 @@ BLAZEPOSE_TO_SMPLX = {0: 55, 2: 57, 5: 56, 7: 59, 8: 58, 11: 16, 12: 17, 13: 18,
 # surface) get less weight.
 BLAZEPOSE_WEIGHT = {0: 0.3, 2: 0.3, 5: 0.3, 7: 0.3, 8: 0.3, 23: 0.5, 24: 0.5}
 
+_BLAZEPOSE_IDS = list(BLAZEPOSE_TO_SMPLX)
+BLAZEPOSE_JOINTS = [BLAZEPOSE_TO_SMPLX[i] for i in _BLAZEPOSE_IDS]  # the SMPL-X joints `blazepose_targets` are of
+_BLAZEPOSE_WEIGHTS = np.array([BLAZEPOSE_WEIGHT.get(i, 1.0) for i in _BLAZEPOSE_IDS], np.float32)
+
+
+def blazepose_targets(world):
+    """The IK targets of BlazePose world landmarks ``(..., 33, 3)`` (metres), or ``(..., 33, 4)`` with visibility:
+    the points of `BLAZEPOSE_JOINTS` ``(..., K, 3)`` and their weights, `BLAZEPOSE_WEIGHT` times the visibility
+    if given (NumPy or JAX)."""
+    points = world[..., _BLAZEPOSE_IDS, :]
+    return points[..., :3], (points[..., 3] if world.shape[-1] > 3 else 1.0) * _BLAZEPOSE_WEIGHTS
+
+
 BODY_IK_JOINTS = tuple(j <= 21 and j not in (20, 21) for j in range(55))  # global + body, wrists left to hands
 LEFT_HAND_IK_JOINTS = tuple(j == 20 or 25 <= j < 40 for j in range(55))
 RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
@@ -46,7 +59,9 @@ IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, cg_itera
                              prior_finger_range=0.2, robust_scale=0.2)
 
 
-def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
+def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
+    """`ik` of one frame with its keypoint model ``km`` made beforehand; ``free_joints`` (55,) and ``fit_betas``
+    as float arrays (traced: one compiled solver serves any free set)."""
     finite = jnp.all(jnp.isfinite(targets), -1)
     conf = jnp.where(finite & (conf > 0), conf, 0.0)
     targets = jnp.where(finite[:, None], targets, 0.0)
@@ -67,7 +82,7 @@ def _ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
 @functools.partial(jax.jit, static_argnames=("config",))
 def _ik_batch(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     # The masks are traced: body and hand IK (both 21 keypoints) share one compiled solver.
-    one = functools.partial(_ik_one, free_joints=free_joints, fit_betas=fit_betas, config=config)
+    one = functools.partial(ik_one, free_joints=free_joints, fit_betas=fit_betas, config=config)
     return jax.vmap(one, in_axes=(None, 0, 0, 0, 0))(km, targets, conf, theta, betas)
 
 
@@ -87,13 +102,11 @@ def body_from_blazepose(model: BodyModel, world: np.ndarray, theta=None, betas=N
     Starts from ``theta`` (default `default_pose`); wrists and hands are kept."""
     world = np.asarray(world, np.float32)
     t = world.shape[0]
-    ids = list(BLAZEPOSE_TO_SMPLX)
-    targets = world[:, ids, :3]
-    conf = world[:, ids, 3] if world.shape[-1] > 3 else np.ones((t, len(ids)), np.float32)
-    conf = conf * np.array([BLAZEPOSE_WEIGHT.get(i, 1.0) for i in ids], np.float32)
+    targets, conf = blazepose_targets(world)
+    conf = np.broadcast_to(conf, targets.shape[:2])
     theta = np.broadcast_to(np.asarray(default_pose()), (t, 55, 3)) if theta is None else theta
     betas = np.zeros((t, model.num_betas), np.float32) if betas is None else betas
-    return ik(model, [BLAZEPOSE_TO_SMPLX[i] for i in ids], targets, conf, theta, betas, BODY_IK_JOINTS, config=config)
+    return ik(model, BLAZEPOSE_JOINTS, targets, conf, theta, betas, BODY_IK_JOINTS, config=config)
 
 
 def hand_into_body(model: BodyModel, side: str, hand_world: np.ndarray, theta, betas, conf=None, config=None):

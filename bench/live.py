@@ -1,0 +1,138 @@
+"""Live capture (`jaxmocap live`): sustained frames/s, latency from a frame's arrival to its parameters out (median
+and 95th percentile) and frames dropped, on the bundled clip played as if live at its own 60 frames/s; and how
+far the causal result is from the offline ``jaxmocap run`` on the same clip (PA-MPJPE of the body joints).
+
+    python bench/live.py [--out bench/results] [--quick]      (or: jaxmocap bench --only live)
+
+Rows: the live path alone; with the web page watched (a viewer reading the MJPEG stream) and every frame sent as
+a UDP JSON line. Each plays the clip ``LOOPS`` times (``--quick``: twice). Compilation happens before the first
+frame (``live`` warms up), as in a real session.
+"""
+
+import argparse
+import json
+import os
+import platform
+import socket
+import sys
+import tempfile
+import threading
+import urllib.request
+from pathlib import Path
+
+import jax
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+CLIP = ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+LOOPS = 6
+BODY_JOINTS = np.arange(22)  # SMPL-X's pelvis to wrists
+
+
+def agreement_mm(model, live_motion: dict, offline_motion: dict, first_frame: int = 0) -> tuple[float, int]:
+    """Mean PA-MPJPE (mm) of the body joints between a live recording and an offline motion of the same video
+    from its frame ``first_frame``, over the frames valid in both (a recording's rows are its ``frame_index``);
+    and how many frames that is."""
+    import smplx_jax
+    from jaxmocap.motion import motion_params
+    from train.metrics import pa_mpjpe
+
+    rows = np.asarray(live_motion["frame_index"]) - first_frame
+    inside = (rows >= 0) & (rows < len(offline_motion["valid"]))
+    both = np.flatnonzero(inside & np.asarray(live_motion["valid"]))
+    both = both[np.asarray(offline_motion["valid"])[rows[both]]]
+    joints = jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))
+    ours = np.asarray(joints(model, motion_params(live_motion, model.num_expression, both)))[:, BODY_JOINTS]
+    theirs = np.asarray(joints(model, motion_params(offline_motion, model.num_expression, rows[both])))
+    errors = pa_mpjpe(ours, theirs[:, BODY_JOINTS], np.ones(ours.shape[:2], bool))
+    return float(np.mean(errors) * 1000), len(both)
+
+
+def _watch(port: int, stop: threading.Event, seen: list) -> None:
+    """A viewer: reads the page's MJPEG stream until ``stop``, counting the frames it got."""
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/stream.mjpg", timeout=10) as stream:
+        while not stop.is_set():
+            line = stream.readline()
+            if line.startswith(b"Content-Length:"):
+                stream.readline()
+                stream.read(int(line.split(b":")[1]))
+                seen.append(1)
+
+
+def session(loops: int, watched: bool) -> dict:
+    from jaxmocap.live import LiveConfig, live
+
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(0.5)
+    stop, seen, messages, threads = threading.Event(), [], [], []
+
+    def started(port):
+        if watched:
+            threads.append(threading.Thread(target=_watch, args=(port, stop, seen), daemon=True))
+            threads.append(threading.Thread(target=_receive, args=(receiver, stop, messages), daemon=True))
+            for t in threads:
+                t.start()
+
+    config = LiveConfig(CLIP, realtime=True, loops=loops, progress=False, serve=0 if watched else None,
+                        udp=receiver.getsockname() if watched else None)
+    report = live(config, started)
+    stop.set()
+    for t in threads:
+        t.join(timeout=5)
+    receiver.close()
+    return dict(read=report.read, solved=report.solved, dropped=report.dropped, seconds=report.seconds,
+                fps=report.fps, latency_median_ms=float(np.median(report.latency_ms)),
+                latency_p95_ms=float(np.percentile(report.latency_ms, 95)), viewer_frames=len(seen),
+                udp_messages=len(messages))
+
+
+def _receive(receiver: socket.socket, stop: threading.Event, messages: list) -> None:
+    while not stop.is_set():
+        try:
+            messages.append(receiver.recv(65536))
+        except TimeoutError:
+            continue
+
+
+def agreement() -> dict:
+    import smplx_jax
+    from jaxmocap.live import LiveConfig, live
+    from jaxmocap.motion import read_motion
+    from jaxmocap.pipeline import RunConfig, run
+
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    with tempfile.TemporaryDirectory() as tmp:
+        live(LiveConfig(CLIP, record=Path(tmp) / "live", progress=False))
+        run(RunConfig(CLIP, overlay=False, progress=False), Path(tmp) / "run")
+        ours, theirs = (read_motion(Path(tmp) / name / "motion.npz") for name in ("live", "run"))
+    error, frames = agreement_mm(model, ours, theirs)
+    return dict(pa_mpjpe_mm=error, frames=frames)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("bench/results"))
+    parser.add_argument("--quick", action="store_true", help="the clip twice per row")
+    args = parser.parse_args()
+    loops = 2 if args.quick else LOOPS
+    rows = {"as live, 60 fps": session(loops, watched=False),
+            "as live, page watched + UDP": session(loops, watched=True)}
+    close = agreement()
+
+    print(f"\njaxmocap live, {CLIP.name} played {loops}x at 60 frames/s, {os.cpu_count()} CPUs, {platform.machine()}")
+    print(f"{'':<30}{'frames/s':>9}{'median ms':>10}{'p95 ms':>8}{'solved':>8}{'dropped':>8}{'viewer':>8}{'udp':>6}")
+    for name, r in rows.items():
+        print(f"{name:<30}{r['fps']:>9.1f}{r['latency_median_ms']:>10.0f}{r['latency_p95_ms']:>8.0f}{r['solved']:>8}"
+              f"{r['dropped']:>8}{r['viewer_frames']:>8}{r['udp_messages']:>6}")
+    print(f"live against offline run, every frame: PA-MPJPE {close['pa_mpjpe_mm']:.1f} mm over {close['frames']} "
+          "frames (body joints)")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "live.json").write_text(json.dumps(dict(benchmark="live", cpus=os.cpu_count(), loops=loops,
+                                                        rows=rows, agreement=close), indent=2))
+    print(f"wrote {args.out / 'live.json'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,160 @@
+"""The live path's solve of each person in each frame, causal: IK warm-started from the person's previous frame,
+a few iterations of the fit to the 2D keypoints, then the One-Euro filter; one compiled call per person and
+frame (`step`)."""
+
+import dataclasses
+import functools
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+import smplx_jax
+from jaxmocap.integrate.fitting import OK, default_pose, fit_one, lens_arrays, openpose_keypoint_model
+from jaxmocap.integrate.inverse_kinematics import (
+    BLAZEPOSE_JOINTS,
+    BODY_IK_JOINTS,
+    LEFT_HAND_IK_JOINTS,
+    RIGHT_HAND_IK_JOINTS,
+    IKConfig,
+    blazepose_targets,
+    ik_one,
+)
+from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, params_of
+from jaxmocap.live.one_euro import Filtered, OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
+from jaxmocap.pipeline.observe import Observations
+from jaxmocap.pipeline.stages import FIT_FROM_IK, Lens
+from smplx_jax import constants
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    """How much each frame solves, and how the One-Euro filter smooths: rotations (speeds in quaternion units
+    per second, about half the angular speed in radians), the translation across the image and in depth (metres;
+    depth, which one view barely sees, the most), the weak-perspective camera (pixels) and the shape. Lighter
+    filters lag less and jitter more (docs/BENCHMARKS.md, "Live"). A person unseen for more than ``reset_after``
+    seconds starts afresh, with ``warm_up`` steps on their first frame."""
+
+    ik_iterations: int = 5
+    ik_cg_iterations: int = 15
+    fit_iterations: int = 5
+    rotations: OneEuro = OneEuro(min_cutoff=1.0, beta=10.0)
+    translation: OneEuro = OneEuro(min_cutoff=1.0, beta=20.0)
+    depth: OneEuro = OneEuro(min_cutoff=0.3, beta=2.0)
+    camera: OneEuro = OneEuro(min_cutoff=1.0, beta=0.5)
+    shape: OneEuro = OneEuro(min_cutoff=0.2)
+    reset_after: float = 0.5
+    warm_up: int = 4
+
+
+class PersonState(NamedTuple):
+    """What a person carries to their next frame: the last IK pose and shape (the next start) and the filters."""
+
+    theta: Float[Array, "55 3"]
+    betas: Float[Array, "B"]
+    rotations: Filtered  # (55, 4) quaternions of the full pose
+    translation: Filtered  # (1, 2): across the image
+    depth: Filtered  # (1, 1)
+    camera: Filtered  # (1, 3): scale, tx, ty
+    shape: Filtered  # (1, B)
+
+
+class Solved(NamedTuple):
+    """One person's body in one frame, filtered; ``valid``: the fit succeeded."""
+
+    params: smplx_jax.SMPLXParams
+    camera_scale: Float[Array, ""]
+    camera_trans: Float[Array, "2"]
+    valid: Bool[Array, ""]
+
+
+class Models(NamedTuple):
+    """The keypoint models of a step: BlazePose's joints, each hand's 21, OpenPose's 67."""
+
+    body: KeypointModel
+    left: KeypointModel
+    right: KeypointModel
+    openpose: KeypointModel
+
+
+def fresh_state(num_betas: int) -> PersonState:
+    """The state of a person not seen before: the fit's default pose, mean shape (filters reset on use)."""
+    theta = default_pose()
+    betas = jnp.zeros(num_betas, jnp.float32)
+    return PersonState(theta, betas, quaternion_state(theta), start_state(jnp.zeros((1, 2))),
+                       start_state(jnp.zeros((1, 1))), start_state(jnp.zeros((1, 3))), start_state(betas[None]))
+
+
+_MASKS = tuple(jnp.asarray(m, jnp.float32) for m in (BODY_IK_JOINTS, LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS))
+
+
+@functools.partial(jax.jit, static_argnames=("num_expression", "settings"))
+def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""], dt: Float[Array, ""], lens: tuple,
+         num_expression: int, settings: LiveSettings) -> tuple[Solved, PersonState]:
+    """One person's frame: ``obs`` = (BlazePose world landmarks (33, 4), hand world landmarks (2, 21, 3), hand
+    presence (2,), OpenPose keypoints (67, 3)); ``fresh``: the filters start here; ``dt``: seconds since the
+    person's last frame; ``lens``: `lens_arrays`."""
+    world, hands_world, hands_conf, keypoints = obs
+    ik_config = IKConfig(iterations=settings.ik_iterations, cg_iterations=settings.ik_cg_iterations)
+    targets, conf = blazepose_targets(world)
+    theta, betas, _, _ = ik_one(models.body, targets, conf, state.theta, state.betas, _MASKS[0], 0.0, ik_config)
+    for side, km in enumerate((models.left, models.right)):
+        seen = jnp.full(21, jnp.where(hands_conf[side] > 0, 1.0, 0.0))
+        theta, betas, _, _ = ik_one(km, hands_world[side], seen, theta, betas, _MASKS[1 + side], 0.0, ik_config)
+    fit_config = dataclasses.replace(FIT_FROM_IK, iterations=settings.fit_iterations)
+    fitted = fit_one(models.openpose, keypoints, theta, betas, None, lens, fit_config)
+    p = fitted.params
+    camera = jnp.concatenate([fitted.camera_scale[None], fitted.camera_trans])[None]
+    begin = jax.tree.map(lambda a, b: jnp.where(fresh, a, b), PersonState(
+        theta, betas, quaternion_state(p.full_pose()), start_state(p.transl[None, :2]),
+        start_state(p.transl[None, 2:]), start_state(camera), start_state(p.betas[None])), state)
+    pose, rotations = one_euro_rotvecs(p.full_pose(), begin.rotations, dt, settings.rotations)
+    across, translation = one_euro(p.transl[None, :2], begin.translation, dt, settings.translation)
+    depth, depth_state = one_euro(p.transl[None, 2:], begin.depth, dt, settings.depth)
+    cam, camera = one_euro(camera, begin.camera, dt, settings.camera)
+    shape, shape_state = one_euro(p.betas[None], begin.shape, dt, settings.shape)
+    valid = fitted.status == OK
+    new = PersonState(theta, betas, rotations, translation, depth_state, camera, shape_state)
+    new = jax.tree.map(lambda a, b: jnp.where(valid, a, b), new, state)
+    params = params_of(pose, shape[0], num_expression).replace(transl=jnp.concatenate([across[0], depth[0]]))
+    return Solved(params, cam[0, 0], cam[0, 1:], valid), new
+
+
+class CausalSolver:
+    """Each person's `step`, frame after frame, with their state kept by identity."""
+
+    def __init__(self, model: smplx_jax.BodyModel, lens: Lens, settings: LiveSettings = LiveSettings()):
+        self.models = Models(keypoint_model(model, BLAZEPOSE_JOINTS),
+                             keypoint_model(model, constants.LEFT_HAND21_FROM_SMPLX),
+                             keypoint_model(model, constants.RIGHT_HAND21_FROM_SMPLX), openpose_keypoint_model(model))
+        self.lens = lens_arrays(lens[0], lens[1], jnp.float32)
+        self.num_betas, self.num_expression = model.num_betas, model.num_expression
+        self.settings = settings
+        self.people: dict[int, tuple[PersonState, float]] = {}  # by identity: state, time last solved
+
+    def warm_up(self) -> None:
+        """Compile `step` (on nobody: zeros), so that the first person's frame does not wait for it."""
+        obs = (jnp.zeros((33, 4)), jnp.zeros((2, 21, 3)), jnp.zeros(2), jnp.zeros((67, 3)))
+        jax.block_until_ready(step(self.models, obs, fresh_state(self.num_betas), jnp.asarray(True),
+                                   jnp.float32(1.0), self.lens, self.num_expression, self.settings))
+
+    def __call__(self, people: dict[int, Observations], now: float) -> dict[int, Solved]:
+        """Each person of one frame (``Observations`` of one frame) at ``now`` seconds (the frame's time)."""
+        solved = {}
+        for person_id, obs in people.items():
+            arrays = tuple(jnp.asarray(a[0], jnp.float32) for a in (obs.body_world, obs.hands_world, obs.hands_conf,
+                                                                  obs.keypoints))
+            state, last = self.people.get(person_id, (None, -np.inf))
+            fresh = state is None or now - last > self.settings.reset_after
+            if fresh:
+                state = fresh_state(self.num_betas)
+            dt = jnp.float32(max(now - last, 1e-3) if not fresh else 1.0)
+            for _ in range(self.settings.warm_up if fresh else 1):
+                out, state = step(self.models, arrays, state, jnp.asarray(fresh), dt, self.lens,
+                                  self.num_expression, self.settings)
+            solved[person_id] = jax.tree.map(np.asarray, out)
+            self.people[person_id] = (state, now)
+        return solved

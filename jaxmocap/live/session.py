@@ -1,0 +1,248 @@
+"""``jaxmocap live``: frames in as they come, whole-body SMPL-X out as they are solved.
+
+Three threads overlap the stages, handing frames on through one-item `Mailbox` es (nothing waits but the newest):
+the source reads frames (`LiveSource`); detection runs the tracking detector and the identities; the caller's
+thread solves each person causally (`CausalSolver`), sends the frame's message (`stream`) and records it; with a
+viewer a fourth renders the overlay for the web page (`Viewer`). A stage that falls behind drops the frames it
+could not take (counted); a file played as fast as it can be (no ``realtime``) drops nothing.
+"""
+
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import jax
+import numpy as np
+
+import smplx_jax
+from jaxmocap.detect import Detector
+from jaxmocap.detect.detector import search_interval
+from jaxmocap.detect.identities import IdentityTracker
+from jaxmocap.errors import InputError
+from jaxmocap.io import file_sha256
+from jaxmocap.live.causal import CausalSolver, LiveSettings, Solved
+from jaxmocap.live.mailbox import Closed, Mailbox
+from jaxmocap.live.record import Recorder
+from jaxmocap.live.source import Frame, LiveSource
+from jaxmocap.live.stream import UdpSender, frame_message, person_message
+from jaxmocap.live.viewer import Viewer
+from jaxmocap.overlay import Posed, people_over_frame
+from jaxmocap.pipeline.observe import Observations, observe_people
+from jaxmocap.pipeline.stages import lens_of
+
+
+@dataclass(frozen=True)
+class LiveConfig:
+    """``jaxmocap live SOURCE [options]`` as one value.
+
+    ``source``: a webcam index, a stream URL or a video file; ``realtime``: play a file at its frame rate, as a
+    camera would deliver it (frames dropped when the solve falls behind), else as fast as it is solved, every
+    frame; ``loops``: times a file plays (0: until stopped). ``max_people``: people tracked at most. ``serve``: the
+    web page's port (None: no page) on ``host``; ``udp``: ``(host, port)`` to send each frame's JSON line to;
+    ``record``: a folder to write the motions to at the end (as ``jaxmocap run`` does). ``max_frames``: stop after
+    that many frames solved. ``view_height``: the page's frame height in pixels.
+    """
+
+    source: str | Path
+    realtime: bool = False
+    loops: int = 1
+    max_people: int = 1
+    serve: int | None = None
+    host: str = "127.0.0.1"
+    udp: tuple[str, int] | None = None
+    record: Path | None = None
+    model: Path | None = None
+    focal_length: float | None = None
+    max_frames: int | None = None
+    view_height: int = 540
+    progress: bool = True
+    settings: LiveSettings = field(default_factory=LiveSettings)
+
+    def __post_init__(self):
+        checks = (("loops", self.loops >= 0), ("max_people", self.max_people >= 1),
+                  ("serve", self.serve is None or 0 <= self.serve < 65536),
+                  ("max_frames", self.max_frames is None or self.max_frames >= 1),
+                  ("view_height", self.view_height >= 64),
+                  ("focal_length", self.focal_length is None or self.focal_length > 0))
+        for name, ok in checks:
+            if not ok:
+                raise InputError(f"live: bad {name} {getattr(self, name)!r}")
+
+
+@dataclass(frozen=True)
+class LiveReport:
+    """What a live session did: frames read from the source, solved and dropped; seconds from the first frame
+    read to the last result; each solved frame's latency (ms, from its arrival to its parameters out); why it
+    stopped; files written."""
+
+    read: int
+    solved: int
+    dropped: int
+    seconds: float
+    latency_ms: np.ndarray
+    stopped: str
+    written: list[Path]
+    port: int | None = None
+
+    @property
+    def fps(self) -> float:
+        return self.solved / max(self.seconds, 1e-9)
+
+    def summary(self) -> str:
+        lat = self.latency_ms if len(self.latency_ms) else np.zeros(1)
+        return (f"{self.stopped}: {self.solved} of {self.read} frames solved in {self.seconds:.1f} s "
+                f"({self.fps:.1f} frames/s), {self.dropped} dropped, latency median {np.median(lat):.0f} ms, "
+                f"95th percentile {np.percentile(lat, 95):.0f} ms")
+
+
+_VERTICES = jax.jit(lambda model, params: smplx_jax.forward(model, params).vertices)
+
+
+class _Session:
+    """The threads and their hand-offs (`live`)."""
+
+    def __init__(self, config: LiveConfig):
+        self.config = config
+        model_path = Path(config.model) if config.model else smplx_jax.default_model_path()
+        self.model = smplx_jax.load_model(model_path)
+        self.source = LiveSource(config.source, config.realtime, config.loops)
+        cap = self.source.capture
+        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        self.lens = lens_of(size, config.focal_length)
+        self.solver = CausalSolver(self.model, self.lens, config.settings)
+        self.detector = Detector(static_image_mode=False, max_people=config.max_people,
+                                 redetect_every=search_interval(self.source.fps))
+        self.tracker = IdentityTracker()
+        self.detected, self.shown = Mailbox(), Mailbox()
+        self.errors: list[BaseException] = []
+        self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "people": 0}
+        self.viewer = None if config.serve is None else Viewer(config.host, config.serve)
+        self.sender = None if config.udp is None else UdpSender(config.udp)
+        self.recorder = Recorder(self.model, file_sha256(model_path), self.lens,
+                                                                self.source.fps, size) if config.record else None
+
+    def warm_up(self) -> None:
+        """Compile the solve (and the viewer's mesh) before the first frame comes."""
+        self.solver.warm_up()
+        if self.viewer is not None:
+            jax.block_until_ready(_VERTICES(self.model, smplx_jax.SMPLXParams.zeros(self.model.num_betas,
+                                                                                      self.model.num_expression)))
+
+    def _thread(self, target) -> threading.Thread:
+        def guarded():
+            try:
+                target()
+            except Closed:
+                pass
+            except BaseException as err:  # handed to the caller's thread
+                self.errors.append(err)
+            finally:
+                self.detected.close()
+                self.shown.close()
+
+        thread = threading.Thread(target=guarded, name=f"jaxmocap-{target.__name__.strip('_')}", daemon=True)
+        thread.start()
+        return thread
+
+    def _detect(self) -> None:
+        while True:
+            frame = self.source.frames.get()
+            people = observe_people(self.detector, self.tracker, [frame.image])
+            self.detected.put((frame, people), wait=self.source.lossless)
+
+    def _render(self) -> None:
+        faces = np.asarray(self.model.faces)
+        scale = self.config.view_height / self.source.capture.get(cv2.CAP_PROP_FRAME_HEIGHT)
+        while True:
+            frame, solved = self.shown.get()
+            people = [Posed(i, np.asarray(_VERTICES(self.model, s.params)), float(s.camera_scale), s.camera_trans)
+                      for i, s in solved.items() if s.valid]
+            image = people_over_frame(frame.image, people, faces, min(scale, 1.0), *self.lens)
+            stats = self.stats
+            cv2.putText(image, f"{stats['fps']:.1f} frames/s  {stats['latency_ms']:.0f} ms", (10, 24),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
+            ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 80])
+            if ok:
+                self.viewer.publish(jpeg.tobytes(), stats)
+
+    def _solve(self, frame: Frame, people: dict[int, Observations]) -> dict[int, Solved]:
+        now = frame.arrived if self.source.live else frame.index / self.source.fps
+        solved = self.solver(people, now)
+        if self.sender is not None:
+            self.sender.send(frame_message(frame.index, now, [
+                person_message(i, s.params, s.camera_scale, s.camera_trans, people[i].keypoints[0])
+                for i, s in solved.items() if s.valid]))
+        if self.recorder is not None:
+            self.recorder.add(frame.index, now, solved, {i: o.keypoints[0] for i, o in people.items()})
+        return solved
+
+    def run(self) -> LiveReport:
+        threads = [self._thread(self._detect)] + ([self._thread(self._render)] if self.viewer else [])
+        self.source.start()
+        latencies, stopped, first, last, shown_at = [], "end of stream", None, None, 0.0
+        try:
+            while self.config.max_frames is None or len(latencies) < self.config.max_frames:
+                try:
+                    frame, people = self.detected.get(timeout=0.25)
+                except TimeoutError:
+                    continue
+                except Closed:
+                    break
+                solved = self._solve(frame, people)
+                last = time.perf_counter()
+                first = frame.arrived if first is None else first
+                latencies.append(1000 * (last - frame.arrived))
+                if self.viewer is not None:
+                    self.shown.put((frame, solved))
+                if last - shown_at > 1.0:
+                    shown_at = last
+                    self._update_stats(latencies, len(solved), last - first)
+            else:
+                stopped = "max frames"
+        except KeyboardInterrupt:
+            stopped = "interrupted"
+        finally:
+            self.source.stop()
+            self.detected.close()
+            self.shown.close()
+            for thread in threads:
+                thread.join()
+            if self.config.progress:
+                print(file=sys.stderr)
+        if self.errors:
+            raise self.errors[0]
+        return self._finish(latencies, stopped, 0.0 if first is None else last - first)
+
+    def _dropped(self) -> int:
+        return self.source.frames.dropped + self.detected.dropped
+
+    def _update_stats(self, latencies: list[float], people: int, seconds: float) -> None:
+        recent = latencies[-60:]
+        self.stats = {"fps": len(latencies) / max(seconds, 1e-9), "latency_ms": float(np.median(recent)),
+                      "dropped": self._dropped(), "people": people}
+        if self.config.progress:
+            s = self.stats
+            print(f"\rlive: {s['fps']:.1f} frames/s, latency {s['latency_ms']:.0f} ms, {s['dropped']} dropped, "
+                  f"{s['people']} people", end="", file=sys.stderr, flush=True)
+
+    def _finish(self, latencies: list[float], stopped: str, seconds: float) -> LiveReport:
+        written = [] if self.recorder is None else self.recorder.write(self.config.record)
+        port = None if self.viewer is None else self.viewer.port
+        for closable in (self.viewer, self.sender):
+            if closable is not None:
+                closable.close()
+        return LiveReport(self.source.read, len(latencies), self._dropped(), seconds, np.asarray(latencies), stopped,
+                          written, port)
+
+
+def live(config: LiveConfig, started=None) -> LiveReport:
+    """Run a live session until the source ends, ``max_frames`` are solved or Ctrl-C; ``started(port)`` is called
+    once frames flow (``port``: the web page's, or None)."""
+    session = _Session(config)
+    session.warm_up()
+    if started is not None:
+        started(None if session.viewer is None else session.viewer.port)
+    return session.run()

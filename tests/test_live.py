@@ -1,0 +1,264 @@
+"""`jaxmocap live`: the hand-offs, the filter, the web page and the stream on their own; then the causal path on
+the bundled clip played as live (every frame, or in real time and slowed down on purpose), the stream parsed
+back, agreement with the offline run, and the command's exits (Ctrl-C, a camera that cannot be opened)."""
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import smplx_jax
+from bench import live as live_bench
+from jaxmocap.live import LiveConfig, live, params_from_message
+from jaxmocap.live.causal import CausalSolver
+from jaxmocap.live.mailbox import Closed, Mailbox
+from jaxmocap.live.one_euro import OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
+from jaxmocap.live.source import LiveSource
+from jaxmocap.live.stream import frame_message, parse_address, person_message
+from jaxmocap.live.viewer import Viewer
+from jaxmocap.motion import motion_params, read_motion
+from jaxmocap.pipeline import RunConfig, run
+
+CLIP = Path(__file__).resolve().parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+
+
+# -- the parts ----------------------------------------------------------------------------------------------------
+def test_mailbox_keeps_only_the_newest_and_counts_the_rest():
+    box = Mailbox()
+    for k in range(5):
+        box.put(k)
+    assert box.get(timeout=1) == 4 and box.dropped == 4
+    with pytest.raises(TimeoutError):
+        box.get(timeout=0.01)
+    box.put("last")
+    box.close()
+    assert box.get() == "last"
+    with pytest.raises(Closed):
+        box.get()
+
+
+def test_mailbox_waits_when_lossless():
+    box, taken = Mailbox(), []
+
+    def take():
+        for _ in range(20):
+            taken.append(box.get(timeout=5))
+
+    reader = threading.Thread(target=take)
+    reader.start()
+    for k in range(20):
+        box.put(k, wait=True)
+    reader.join()
+    assert taken == list(range(20)) and box.dropped == 0
+
+
+def test_one_euro_follows_a_step_without_jitter_at_rest():
+    settings = OneEuro(min_cutoff=1.0, beta=0.5)
+    state = start_state(jnp.zeros((1, 2)))
+    out = []
+    for _ in range(120):  # a step to 1, 2 s at 60 fps
+        value, state = one_euro(jnp.ones((1, 2)), state, 1 / 60, settings)
+        out.append(float(value[0, 0]))
+    assert 0 < out[0] < 0.6 and np.all(np.diff(out) >= 0) and out[-1] == pytest.approx(1.0, abs=1e-3)
+    noisy = np.random.default_rng(0).normal(0, 0.01, (120, 1, 2))
+    state, still = start_state(jnp.zeros((1, 2))), []
+    for x in noisy:
+        value, state = one_euro(jnp.asarray(x), state, 1 / 60, settings)
+        still.append(np.asarray(value))
+    assert np.std(still[20:]) < 0.3 * np.std(noisy)
+
+
+def test_one_euro_rotations_ignore_the_quaternion_sign():
+    """The same rotation written either way round (near pi, where axis-angles jump) gives a steady output."""
+    near_pi = np.array([[3.1, 0.0, 0.0]], np.float32)
+    other_way = -near_pi * (2 * np.pi - 3.1) / 3.1  # the same rotation
+    state = quaternion_state(jnp.asarray(near_pi))
+    for x in (near_pi, other_way) * 10:
+        value, state = one_euro_rotvecs(jnp.asarray(x), state, 1 / 60, OneEuro(1.0, 0.5))
+        angle = np.linalg.norm(np.asarray(value)[0])
+        assert angle == pytest.approx(3.1, abs=1e-3)
+
+
+def test_a_file_played_as_live_drops_what_a_slow_reader_misses():
+    source = LiveSource(CLIP, realtime=True).start()
+    taken = []
+    try:
+        while True:
+            frame = source.frames.get(timeout=5)
+            taken.append(frame.index)
+            time.sleep(0.05)  # three frames' time at 60 fps
+    except Closed:
+        pass
+    assert source.read == 100 and len(taken) + source.frames.dropped == 100
+    assert 20 <= len(taken) <= 45 and taken == sorted(taken) and taken[-1] >= 97
+
+
+def test_udp_messages_parse_back_into_params():
+    params = smplx_jax.SMPLXParams.zeros(10, 10).replace(
+        body_pose=jnp.asarray(np.random.default_rng(1).normal(0, 0.3, (21, 3)), jnp.float32))
+    keypoints = np.random.default_rng(2).uniform(0, 1000, (67, 3))
+    message = json.loads(frame_message(7, 0.125, [person_message(3, params, 500.0, [10.0, 20.0], keypoints)]))
+    assert message["frame"] == 7 and message["time"] == 0.125 and message["people"][0]["id"] == 3
+    back = params_from_message(message["people"][0])
+    for a, b in zip(jax.tree.leaves(back), jax.tree.leaves(params)):
+        np.testing.assert_allclose(a, b, atol=1e-5)
+    assert parse_address(":9000") == ("127.0.0.1", 9000)
+    with pytest.raises(ValueError, match="HOST:PORT"):
+        parse_address("localhost")
+
+
+def _get(port, path):
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=5) as reply:
+            return reply.status, reply.headers["Content-Type"], reply.read()
+    except urllib.error.HTTPError as err:
+        return err.code, None, b""
+
+
+def test_web_page_serves_its_page_and_stream_and_nothing_else():
+    viewer = Viewer("127.0.0.1", 0)
+    try:
+        status, kind, body = _get(viewer.port, "/")
+        assert status == 200 and kind.startswith("text/html") and b"/stream.mjpg" in body
+        viewer.publish(b"\xff\xd8jpeg\xff\xd9", {"fps": 20.0, "latency_ms": 50.0, "dropped": 1, "people": 1})
+        assert json.loads(_get(viewer.port, "/stats.json")[2])["fps"] == 20.0
+        for path in ("/../../etc/passwd", "/etc/passwd", "/%2e%2e/%2e%2e/etc/passwd", "/stream.mjpg/../x",
+                     "/jaxmocap/live/viewer.py", "//etc/passwd"):
+            assert _get(viewer.port, path)[0] == 404, path
+        with socket.create_connection(("127.0.0.1", viewer.port)) as raw:  # a path urllib would normalise
+            raw.sendall(b"GET /../../etc/passwd HTTP/1.0\r\n\r\n")
+            assert raw.recv(100).startswith(b"HTTP/1.0 404")
+        with urllib.request.urlopen(f"http://127.0.0.1:{viewer.port}/stream.mjpg", timeout=5) as stream:
+            assert "multipart/x-mixed-replace" in stream.headers["Content-Type"]
+            threading.Timer(0.2, viewer.publish, (b"\xff\xd8second\xff\xd9",)).start()
+            assert stream.readline().startswith(b"--") and b"image/jpeg" in stream.readline()
+    finally:
+        viewer.close()
+
+
+def test_a_viewer_that_stops_reading_never_stalls_publishing():
+    viewer = Viewer("127.0.0.1", 0, timeout=2.0)
+    stalled = socket.create_connection(("127.0.0.1", viewer.port))
+    stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    stalled.sendall(b"GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")  # and never reads
+    try:
+        frame = bytes(500_000)
+        start = time.perf_counter()
+        for _ in range(200):  # 100 MB: far beyond any socket buffer
+            viewer.publish(frame)
+            time.sleep(0.001)
+        assert time.perf_counter() - start < 2.0
+        assert _get(viewer.port, "/")[0] == 200  # and others are still served
+    finally:
+        stalled.close()
+        viewer.close()
+
+
+# -- the causal path on the clip ------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def played(tmp_path_factory):
+    """The clip played as fast as it is solved (every frame), recorded and streamed over UDP."""
+    out = tmp_path_factory.mktemp("live")
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(0.2)
+    messages, done = [], threading.Event()
+
+    def receive():
+        while not done.is_set():
+            try:
+                messages.append(json.loads(receiver.recv(65536)))
+            except TimeoutError:
+                continue
+
+    thread = threading.Thread(target=receive)
+    thread.start()
+    report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False))
+    time.sleep(0.3)
+    done.set()
+    thread.join()
+    receiver.close()
+    return report, read_motion(out / "motion.npz"), messages
+
+
+def test_every_frame_is_solved_when_played_as_fast_as_solved(played):
+    report, motion, _ = played
+    assert report.stopped == "end of stream" and report.read == report.solved == 100 and report.dropped == 0
+    assert motion["valid"].sum() >= 98 and np.array_equal(motion["frame_index"], np.arange(100))
+    assert np.median(motion["reprojection_error_px"][motion["valid"]]) < 15.0
+
+
+def test_the_stream_carries_the_recorded_bodies(played):
+    _, motion, messages = played
+    assert len(messages) >= 95  # UDP on this machine's loopback: nothing lost in practice
+    for message in messages[::10]:
+        row, person = message["frame"], message["people"][0]
+        recorded = jax.tree.map(lambda a: a[0], motion_params(motion, 10, [row]))
+        for a, b in zip(jax.tree.leaves(params_from_message(person)), jax.tree.leaves(recorded)):
+            np.testing.assert_allclose(a, b, atol=2e-5)
+        np.testing.assert_allclose(person["keypoints_2d"], motion["keypoints_2d"][row], atol=0.01)
+
+
+def test_live_agrees_with_the_offline_run(played, tmp_path):
+    """The offline run's frames 20-27 (the shapes `test_pipeline` compiles) against the live ones."""
+    _, motion, _ = played
+    run(RunConfig(CLIP, start=20, end=28, chunk_size=4, overlay=False, progress=False), tmp_path)
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    error, frames = live_bench.agreement_mm(model, motion, read_motion(tmp_path / "motion.npz"), first_frame=20)
+    assert frames == 8 and error <= 30.0, error
+
+
+def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
+    solve = CausalSolver.__call__
+
+    def slow(self, people, now):
+        time.sleep(0.06)
+        return solve(self, people, now)
+
+    monkeypatch.setattr(CausalSolver, "__call__", slow)
+    report = live(LiveConfig(CLIP, realtime=True, progress=False))
+    assert report.read == 100 and report.solved + report.dropped == 100
+    assert 15 <= report.solved <= 40, report.summary()
+    assert np.percentile(report.latency_ms, 95) < 250, report.summary()  # each frame waits for one solve at most
+
+
+# -- the command ------------------------------------------------------------------------------------------------------
+def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp_path):
+    command = [sys.executable, "-m", "jaxmocap.cli", "live", str(CLIP), "--realtime", "--loop", "0", "--serve", "0",
+               "--record", str(tmp_path), "--quiet"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        while "capturing" not in line:
+            line = process.stderr.readline()
+            assert line or process.poll() is None, process.stderr.read()
+        port = int(line.rsplit(":", 1)[1].split("/")[0])
+        time.sleep(2.0)
+        status, kind, _ = _get(port, "/")
+        assert status == 200 and _get(port, "/../etc/passwd")[0] == 404
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert process.returncode == 0, err
+    assert out.startswith("interrupted: ") and "frames/s" in out
+    assert read_motion(tmp_path / "motion.npz")["valid"].sum() >= 10
+
+
+def test_a_camera_that_cannot_be_opened_is_one_clear_line():
+    result = subprocess.run([sys.executable, "-m", "jaxmocap.cli", "live", "7"], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1] == \
+        "jaxmocap live: error: cannot open webcam 7 (unsupported, corrupt or busy)"
