@@ -22,6 +22,7 @@ from jaxmocap.detect import Detector
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.errors import InputError
+from jaxmocap.frame_source import MediaError
 from jaxmocap.io import file_sha256
 from jaxmocap.live.causal import CausalSolver, LiveSettings, Solved
 from jaxmocap.live.mailbox import Closed, Mailbox
@@ -214,6 +215,9 @@ class _Session:
                 print(file=sys.stderr)
         if self.errors:
             raise self.errors[0]
+        if self.source.read == 0 and stopped == "end of stream":
+            raise MediaError(f"{self.config.source} gave no frames (empty, unsupported, or a file served without "
+                             "seeking)")
         return self._finish(latencies, stopped, 0.0 if first is None else last - first)
 
     def _dropped(self) -> int:
