@@ -226,7 +226,7 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true", help="the bundled view only")
     parser.add_argument("--views", nargs="*", choices=sorted(VIEWS), default=sorted(VIEWS))

@@ -91,7 +91,7 @@ def _measure(path: Path, batch: int, min_seconds: float) -> dict:
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--batches", type=int, nargs="*", default=[1, 64, 1024])

@@ -126,7 +126,7 @@ def _params_of(unknowns):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--frames", type=int, nargs="*", default=[256, 1024])

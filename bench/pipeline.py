@@ -22,7 +22,7 @@ TWO_PEOPLE = ROOT / "tests" / "data" / "pose2sim_multi_cam01.mp4"
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true", help="one run (compilation included)")
     args = parser.parse_args()

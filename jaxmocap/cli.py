@@ -1,6 +1,7 @@
 """The ``jaxmocap`` command line."""
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -113,16 +114,17 @@ def _cmd_convert_frankmocap(args):
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="jaxmocap", description=__doc__)
+    parser = argparse.ArgumentParser(allow_abbrev=False, prog="jaxmocap", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
+    command = functools.partial(commands.add_parser, allow_abbrev=False)  # a mistyped option is an error
 
-    p = commands.add_parser("demo", help="the main job on the bundled sample clip: motion, overlay video, exports")
+    p = command("demo", help="the main job on the bundled sample clip: motion, overlay video, exports")
     p.add_argument("--out", type=Path, default=Path("jaxmocap_demo"), help="output folder (default: %(default)s)")
     p.add_argument("--frankmocap-pkl", action="store_true",
                    help="also FrankMocap's per-frame prediction pickles in DIR/mocap/")
     p.set_defaults(run=_cmd_demo)
 
-    p = commands.add_parser("run", help="video, image folder, image or webcam -> DIR/motion.npz, overlay, exports")
+    p = command("run", help="video, image folder, image or webcam -> DIR/motion.npz, overlay, exports")
     p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, default=Path("jaxmocap_out"), help="output folder (default: %(default)s)")
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
@@ -154,7 +156,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=_cmd_run)
 
-    p = commands.add_parser("live", help="webcam, stream or file -> SMPL-X frame by frame, on a web page and over UDP")
+    p = command("live", help="webcam, stream or file -> SMPL-X frame by frame, on a web page and over UDP")
     p.add_argument("source", help="webcam index (0), stream URL, or video file")
     p.add_argument("--realtime", action="store_true",
                    help="play a file at its own frame rate, as if live (frames dropped when behind)")
@@ -175,7 +177,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no live status line")
     p.set_defaults(run=_cmd_live)
 
-    p = commands.add_parser("detect", help="2D keypoints (BODY_25 + hands) as OpenPose JSON, one file per frame")
+    p = command("detect", help="2D keypoints (BODY_25 + hands) as OpenPose JSON, one file per frame")
     p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, required=True, help="output folder for the JSON files")
     p.add_argument("--overlay", action="store_true", help="also draw the skeletons (images or a video)")
@@ -186,7 +188,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_detect)
 
-    p = commands.add_parser("fit", help="fit SMPL-X to OpenPose JSON keypoints alone -> DIR/motion.npz")
+    p = command("fit", help="fit SMPL-X to OpenPose JSON keypoints alone -> DIR/motion.npz")
     p.add_argument("keypoints", type=Path, help="folder of OpenPose JSON files, one per frame (sorted by name)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
@@ -199,7 +201,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_fit)
 
-    p = commands.add_parser("export", help="a motion.npz as BVH (skeleton) or glTF 2.0 (skinned mesh) animation")
+    p = command("export", help="a motion.npz as BVH (skeleton) or glTF 2.0 (skinned mesh) animation")
     p.add_argument("motion", type=Path, help="motion.npz")
     p.add_argument("--format", choices=("bvh", "gltf"), required=True)
     p.add_argument("--out", type=Path, required=True, help="file to write (.bvh; .glb binary or .gltf JSON)")
@@ -207,19 +209,19 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--focal", type=float, default=None, help="focal length in pixels (default: image diagonal)")
     p.set_defaults(run=_cmd_export)
 
-    p = commands.add_parser("model", help="write the license-free default body model as an SMPL-X .npz")
+    p = command("model", help="write the license-free default body model as an SMPL-X .npz")
     p.add_argument("--out", type=Path, required=True, help="file to write, e.g. models/smplx/SMPLX_NEUTRAL.npz")
     p.add_argument("--render", type=Path, default=None, help="also render it (rest and example pose) into this folder")
     p.set_defaults(run=_cmd_model)
 
-    p = commands.add_parser("convert-frankmocap", help="FrankMocap's PyTorch checkpoints -> our weights (needs torch)")
+    p = command("convert-frankmocap", help="FrankMocap's PyTorch checkpoints -> our weights (needs torch)")
     p.add_argument("--hand", type=Path, required=True, help="hand module checkpoint, pose_shape_best.pth")
     p.add_argument("--hand-mean", type=Path, required=True, help="the hand's mean_mano_params.pkl")
     p.add_argument("--body", type=Path, required=True, help="body module checkpoint (SPIN/HMR .pt)")
     p.add_argument("--out", type=Path, required=True, help="output folder (regressors.json, hand.npz, body.npz)")
     p.set_defaults(run=_cmd_convert_frankmocap)
 
-    p = commands.add_parser("bench", help="the benchmark suite, side by side with peers (needs a source checkout)")
+    p = command("bench", help="the benchmark suite, side by side with peers (needs a source checkout)")
     p.add_argument("--only", nargs="*", default=None, help="benchmark names, e.g. body_model")
     p.add_argument("--out", type=Path, default=Path("bench/results"), help="folder for JSON results")
     p.add_argument("--quick", action="store_true", help="fewer repetitions")

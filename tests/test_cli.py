@@ -3,8 +3,10 @@
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
+import pytest
 import smplx
 import torch
 
@@ -79,3 +81,16 @@ def test_compiled_programs_are_kept_on_disk_for_the_next_run(tmp_path):
     assert [r.stdout.strip() for r in runs] == ["miss", "hit"]
     assert not any("compilation cache" in r.stderr for r in runs), runs[1].stderr  # e.g. filelock missing
     assert any(f.name.endswith("-cache") for f in (tmp_path / "xla").iterdir())
+
+
+def test_an_option_abbreviated_or_mistyped_is_an_error(capsys):
+    """``--mode`` is not taken for ``--model``: argparse's abbreviations are off in every command."""
+    with pytest.raises(SystemExit) as stop:
+        main(["run", "x.jpg", "--mode", "hands"])
+    assert stop.value.code == 2 and "unrecognized arguments: --mode hands" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["live", "0", "--seve", "8080"])
+    parsers = [Path(__file__).parents[1] / d for d in ("jaxmocap", "bench", "train")]
+    calls = [line for folder in parsers for path in folder.rglob("*.py") for line in path.read_text().splitlines()
+             if "ArgumentParser(" in line]
+    assert calls and all("allow_abbrev=False" in line for line in calls), calls

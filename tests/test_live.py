@@ -20,6 +20,8 @@ import pytest
 
 import smplx_jax
 from bench import live as live_bench
+from jaxmocap.errors import InputError
+from jaxmocap.frame_source import MediaError
 from jaxmocap.live import LiveConfig, live, params_from_message
 from jaxmocap.live.causal import CausalSolver
 from jaxmocap.live.mailbox import Closed, Mailbox
@@ -254,6 +256,20 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
     assert process.returncode == 0, err
     assert out.startswith("interrupted: ") and "frames/s" in out
     assert read_motion(tmp_path / "motion.npz")["valid"].sum() >= 10
+
+
+def test_bad_inputs_are_named_before_anything_runs():
+    with pytest.raises(MediaError, match="missing.mp4 does not exist"):
+        live(LiveConfig("missing.mp4"))
+    with pytest.raises(InputError, match="bad loops"):
+        LiveConfig(CLIP, loops=-1)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        with pytest.raises(InputError, match="--serve: cannot listen on 127.0.0.1"):
+            live(LiveConfig(CLIP, serve=busy.getsockname()[1]))
+    with pytest.raises(OSError, match="--udp: cannot resolve no-such-host.invalid"):
+        live(LiveConfig(CLIP, udp=("no-such-host.invalid", 9000)))
 
 
 def test_a_camera_that_cannot_be_opened_is_one_clear_line():

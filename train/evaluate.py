@@ -131,7 +131,8 @@ def _roots(datasets: list[str], data_dir: str) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m train.evaluate", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, prog="python -m train.evaluate",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("--dataset", required=True, help=f"comma-separated, of: {', '.join(HAND_DATASETS)}")
     parser.add_argument("--data-dir", required=True, help="one root per dataset, or one folder of dataset folders")
     parser.add_argument("--weights", required=True, help="comma-separated weights folders (a table row each)")

@@ -14,7 +14,8 @@ from train import configs
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m train.main", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(allow_abbrev=False, prog="python -m train.main",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("--config", required=True, choices=configs.NAMES)
     parser.add_argument("--workdir", required=True)
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="override a config field")

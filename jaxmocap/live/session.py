@@ -22,7 +22,6 @@ from jaxmocap.detect import Detector
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.errors import InputError
-from jaxmocap.frame_source import MediaError
 from jaxmocap.io import file_sha256
 from jaxmocap.live.causal import CausalSolver, LiveSettings, Solved
 from jaxmocap.live.mailbox import Closed, Mailbox
@@ -86,7 +85,6 @@ class LiveReport:
     latency_ms: np.ndarray
     stopped: str
     written: list[Path]
-    port: int | None = None
 
     @property
     def fps(self) -> float:
@@ -109,10 +107,9 @@ class _Session:
         self.config = config
         model_path = Path(config.model) if config.model else smplx_jax.default_model_path()
         self.model = smplx_jax.load_model(model_path)
+        self.sender = None if config.udp is None else UdpSender(config.udp)
         self.source = LiveSource(config.source, config.realtime, config.loops)
-        cap = self.source.capture
-        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-        self.lens = lens_of(size, config.focal_length)
+        self.lens = lens_of(self.source.size, config.focal_length)
         self.solver = CausalSolver(self.model, self.lens, config.settings)
         self.detector = Detector(static_image_mode=False, max_people=config.max_people,
                                  redetect_every=search_interval(self.source.fps))
@@ -120,10 +117,21 @@ class _Session:
         self.detected, self.shown = Mailbox(), Mailbox()
         self.errors: list[BaseException] = []
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "people": 0}
-        self.viewer = None if config.serve is None else Viewer(config.host, config.serve)
-        self.sender = None if config.udp is None else UdpSender(config.udp)
-        self.recorder = Recorder(self.model, file_sha256(model_path), self.lens,
-                                                                self.source.fps, size) if config.record else None
+        self.recorder = None if config.record is None else Recorder(
+            self.model, file_sha256(model_path), self.lens, self.source.fps, self.source.size)
+        self.viewer = None
+        try:
+            self.viewer = None if config.serve is None else Viewer(config.host, config.serve)
+        except OSError as err:
+            self.close()
+            raise InputError(f"--serve: cannot listen on {config.host}:{config.serve} ({err.strerror})") from None
+
+    def close(self) -> None:
+        """Release the source, the page and the stream (all idempotent)."""
+        self.source.capture.release()
+        for closable in (self.viewer, self.sender):
+            if closable is not None:
+                closable.close()
 
     def warm_up(self) -> None:
         """Compile the solve (and the viewer's mesh) before the first frame comes."""
@@ -156,12 +164,12 @@ class _Session:
 
     def _render(self) -> None:
         faces = np.asarray(self.model.faces)
-        scale = self.config.view_height / self.source.capture.get(cv2.CAP_PROP_FRAME_HEIGHT)
+        scale = min(1.0, self.config.view_height / self.source.size[1])
         while True:
             frame, solved = self.shown.get()
             people = [Posed(i, np.asarray(_VERTICES(self.model, s.params)), float(s.camera_scale), s.camera_trans)
                       for i, s in solved.items() if s.valid]
-            image = people_over_frame(frame.image, people, faces, min(scale, 1.0), *self.lens)
+            image = people_over_frame(frame.image, people, faces, scale, *self.lens)
             stats = self.stats
             cv2.putText(image, f"{stats['fps']:.1f} frames/s  {stats['latency_ms']:.0f} ms", (10, 24),
                         cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
@@ -211,13 +219,11 @@ class _Session:
             self.shown.close()
             for thread in threads:
                 thread.join()
+            self.close()
             if self.config.progress:
                 print(file=sys.stderr)
         if self.errors:
             raise self.errors[0]
-        if self.source.read == 0 and stopped == "end of stream":
-            raise MediaError(f"{self.config.source} gave no frames (empty, unsupported, or a file served without "
-                             "seeking)")
         return self._finish(latencies, stopped, 0.0 if first is None else last - first)
 
     def _dropped(self) -> int:
@@ -234,19 +240,19 @@ class _Session:
 
     def _finish(self, latencies: list[float], stopped: str, seconds: float) -> LiveReport:
         written = [] if self.recorder is None else self.recorder.write(self.config.record)
-        port = None if self.viewer is None else self.viewer.port
-        for closable in (self.viewer, self.sender):
-            if closable is not None:
-                closable.close()
         return LiveReport(self.source.read, len(latencies), self._dropped(), seconds, np.asarray(latencies), stopped,
-                          written, port)
+                          written)
 
 
 def live(config: LiveConfig, started=None) -> LiveReport:
     """Run a live session until the source ends, ``max_frames`` are solved or Ctrl-C; ``started(port)`` is called
-    once frames flow (``port``: the web page's, or None)."""
+    when capture starts, after compiling (``port``: the web page's, or None)."""
     session = _Session(config)
-    session.warm_up()
+    try:
+        session.warm_up()
+    except BaseException:
+        session.close()
+        raise
     if started is not None:
         started(None if session.viewer is None else session.viewer.port)
     return session.run()

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from jaxmocap.frame_source import capture
+from jaxmocap.frame_source import MediaError, capture
 from jaxmocap.live.mailbox import Mailbox
 
 
@@ -30,11 +30,17 @@ def is_live(source) -> bool:
 
 class LiveSource:
     """Reads ``source`` in a thread into `frames` until its end (a file played ``loops`` times; 0: for ever) or
-    `stop`. ``fps``: the source's frame rate; ``read``: frames read; ``frames.dropped``: those replaced before
-    they were taken."""
+    `stop`. ``fps``: the source's frame rate; ``size``: (width, height) of its first frame, read on opening (a
+    source without one is a `MediaError`); ``read``: frames read; ``frames.dropped``: those replaced before they
+    were taken."""
 
     def __init__(self, source, realtime: bool = False, loops: int = 1):
         self.capture = capture(source)
+        ok, self._first = self.capture.read()
+        if not ok or self._first is None:
+            self.capture.release()
+            raise MediaError(f"{source} gave no frames (empty, unsupported, or a file served without seeking)")
+        self.size = (self._first.shape[1], self._first.shape[0])
         self.live = is_live(source)
         self.fps = float(self.capture.get(cv2.CAP_PROP_FPS) or 0.0) or 30.0
         self.lossless = not (self.live or realtime)
@@ -54,22 +60,24 @@ class LiveSource:
         self._thread.join()
 
     def _run(self) -> None:
-        start, played = time.perf_counter(), 0
+        start, played, image, this_play = time.perf_counter(), 0, self._first, 0
         try:
             while not self._stop.is_set():
                 due = start + self.read / self.fps
                 if not (self.live or self.lossless) and self._stop.wait(max(0.0, due - time.perf_counter())):
                     return
-                ok, image = self.capture.read()
-                if not ok or image is None:
+                if image is None:
+                    ok, image = self.capture.read()
+                if image is None:  # the end: again from the start, unless the file cannot be played again
                     played += 1
-                    if self.live or (self.loops and played >= self.loops) or self.read == 0:
+                    if self.live or (self.loops and played >= self.loops) or this_play == 0:
                         return
                     self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                    this_play = 0
                     continue
                 arrived = time.perf_counter() if (self.live or self.lossless) else due
                 self.frames.put(Frame(self.read, image, arrived), wait=self.lossless)
-                self.read += 1
+                self.read, this_play, image = self.read + 1, this_play + 1, None
         finally:
             self.capture.release()
             self.frames.close()

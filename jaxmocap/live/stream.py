@@ -46,11 +46,15 @@ def parse_address(text: str) -> tuple[str, int]:
 
 
 class UdpSender:
-    """Sends each message as one datagram to ``address``; ``sent`` and ``dropped`` count them."""
+    """Sends each message as one datagram to ``address`` (a name is resolved once, here: `OSError` if it cannot
+    be); ``sent`` and ``dropped`` count them."""
 
     def __init__(self, address: tuple[str, int]):
-        self.address = address
-        self.socket = socket.socket(socket.AF_INET6 if ":" in address[0] else socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            family, _, _, _, self.address = socket.getaddrinfo(*address, type=socket.SOCK_DGRAM)[0]
+        except socket.gaierror as err:
+            raise OSError(f"--udp: cannot resolve {address[0]} ({err.strerror})") from None
+        self.socket = socket.socket(family, socket.SOCK_DGRAM)
         self.socket.setblocking(False)
         self.sent = self.dropped = 0
 

@@ -61,6 +61,8 @@ class Viewer:
         return self._closed
 
     def close(self) -> None:
+        if self._closed:
+            return
         with self._changed:
             self._closed = True
             self._changed.notify_all()
