@@ -237,8 +237,11 @@ def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
 
 # -- the command ------------------------------------------------------------------------------------------------------
 def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp_path):
-    command = [sys.executable, "-m", "jaxmocap.cli", "live", str(CLIP), "--realtime", "--loop", "0", "--serve", "0",
-               "--record", str(tmp_path), "--quiet"]
+    # Ctrl-C as from a terminal: a background job (CI's, nohup's) inherits SIGINT ignored, and Python leaves it so
+    as_from_a_terminal = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                          "from jaxmocap.cli import main; sys.exit(main(sys.argv[1:]))")
+    command = [sys.executable, "-X", "faulthandler", "-c", as_from_a_terminal, "live", str(CLIP), "--realtime",
+               "--loop", "0", "--serve", "0", "--record", str(tmp_path), "--quiet"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = ""
@@ -250,7 +253,12 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
         status, kind, _ = _get(port, "/")
         assert status == 200 and _get(port, "/../etc/passwd")[0] == 404
         process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=60)
+        try:
+            out, err = process.communicate(timeout=180)
+        except subprocess.TimeoutExpired:  # every thread's stack, for the report
+            process.send_signal(signal.SIGABRT)
+            out, err = process.communicate(timeout=30)
+            pytest.fail(f"no exit 180 s after Ctrl-C:\n{err[-6000:]}")
     finally:
         process.kill()
     assert process.returncode == 0, err

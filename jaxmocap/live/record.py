@@ -32,18 +32,22 @@ class Recorder:
         """Each person's motion.npz arrays over the frames solved (not valid where they were not seen), plus
         ``frame_index (T,)`` and ``time_s (T,)``."""
         people = sorted({i for _, _, solved, _ in self.frames for i in solved})
-        absent = Bodies.absent(1, self.model)
-        meta = self.meta | {
-                "frame_index": np.asarray([f for f, *_ in self.frames], np.int64),
-                "time_s": np.asarray([t for _, t, *_ in self.frames], np.float64)}
+        meta = self.meta | {"frame_index": np.asarray([f for f, *_ in self.frames], np.int64),
+                            "time_s": np.asarray([t for _, t, *_ in self.frames], np.float64)}
         motions = {}
         for person in people:
-            rows = [Bodies(jax.tree.map(lambda a: np.asarray(a)[None], s.params), np.asarray(s.camera_scale)[None],
-                           np.asarray(s.camera_trans)[None], np.asarray(s.valid)[None]) if (s := solved.get(person))
-                    is not None else absent for _, _, solved, _ in self.frames]
+            bodies = Bodies.concatenate([self._row(solved.get(person)) for _, _, solved, _ in self.frames])
             keypoints = np.stack([k.get(person, np.zeros((67, 3))) for *_, k in self.frames])
-            motions[person] = motion_arrays(self.model, Bodies.concatenate(rows), keypoints, self.lens) | meta
+            motions[person] = motion_arrays(self.model, bodies, keypoints, self.lens) | meta
         return motions
+
+    def _row(self, solved: Solved | None) -> Bodies:
+        """One frame of a person's `Bodies`: their solved body, or absent."""
+        if solved is None:
+            return Bodies.absent(1, self.model)
+        return Bodies(jax.tree.map(lambda a: np.asarray(a)[None], solved.params),
+                      np.asarray(solved.camera_scale)[None], np.asarray(solved.camera_trans)[None],
+                      np.asarray(solved.valid)[None])
 
     def write(self, folder: Path) -> list[Path]:
         """``folder/motion.npz`` (the main person: valid in most frames) and ``folder/people/<id>/motion.npz``;
