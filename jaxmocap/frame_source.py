@@ -47,8 +47,9 @@ def capture(source) -> cv2.VideoCapture:
         raise MediaError(f"input {source} does not exist")
     cap = cv2.VideoCapture(int(source)) if str(source).isdigit() else cv2.VideoCapture(str(source))
     if not cap.isOpened():
-        what = f"webcam {source}" if str(source).isdigit() else f"{source} as a video or image"
-        raise MediaError(f"cannot open {what} (unsupported, corrupt or busy)")
+        if str(source).isdigit():
+            raise MediaError(f"cannot open webcam {source} (no camera with that index, or it is busy)")
+        raise MediaError(f"cannot open {source} as a video or image (unsupported, corrupt or busy)")
     return cap
 
 

@@ -285,4 +285,4 @@ def test_a_camera_that_cannot_be_opened_is_one_clear_line():
                             timeout=120)
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1] == \
-        "jaxmocap live: error: cannot open webcam 7 (unsupported, corrupt or busy)"
+        "jaxmocap live: error: cannot open webcam 7 (no camera with that index, or it is busy)"

@@ -7,6 +7,8 @@ viewer a fourth renders the overlay for the web page (`Viewer`). A stage that fa
 could not take (counted); a file played as fast as it can be (no ``realtime``) drops nothing.
 """
 
+import contextlib
+import signal
 import sys
 import threading
 import time
@@ -213,7 +215,7 @@ class _Session:
                 stopped = "max frames"
         except KeyboardInterrupt:
             stopped = "interrupted"
-        finally:
+        with _sheltered():  # a second Ctrl-C while stopping must not lose the recording
             self.source.stop()
             self.detected.close()
             self.shown.close()
@@ -222,9 +224,9 @@ class _Session:
             self.close()
             if self.config.progress:
                 print(file=sys.stderr)
-        if self.errors:
-            raise self.errors[0]
-        return self._finish(latencies, stopped, 0.0 if first is None else last - first)
+            if self.errors:
+                raise self.errors[0]
+            return self._finish(latencies, stopped, 0.0 if first is None else last - first)
 
     def _dropped(self) -> int:
         return self.source.frames.dropped + self.detected.dropped
@@ -242,6 +244,19 @@ class _Session:
         written = [] if self.recorder is None else self.recorder.write(self.config.record)
         return LiveReport(self.source.read, len(latencies), self._dropped(), seconds, np.asarray(latencies), stopped,
                           written)
+
+
+@contextlib.contextmanager
+def _sheltered():
+    """Ctrl-C ignored inside (in the main thread; elsewhere signals do not arrive)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def live(config: LiveConfig, started=None) -> LiveReport:
