@@ -21,6 +21,8 @@ SEARCH_SECONDS = 0.2  # while fewer than max_people are tracked, the person dete
 def search_interval(fps: float | None) -> int:
     """Frames between searches for more people in a video of ``fps`` frames/s (6 when unknown)."""
     return max(1, int(SEARCH_SECONDS * fps)) if fps else 6
+
+
 _NO_HAND = HandResult(np.zeros((21, 3)), np.zeros((21, 3)), 0.0, 0.0, Rect(0, 0, 0, 0), Rect(0, 0, 0, 0))
 
 

@@ -30,12 +30,11 @@ class Viewer:
         self._changed = threading.Condition()
         self._jpeg, self._count, self._closed = None, 0, False
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "people": 0}
-        viewer = self
 
         class Handler(_Handler):
             pass
 
-        Handler.viewer, Handler.timeout = viewer, timeout
+        Handler.viewer, Handler.timeout = self, timeout
         self.server = ThreadingHTTPServer((host, port), Handler)
         self.server.daemon_threads = True
         self.port = self.server.server_address[1]
