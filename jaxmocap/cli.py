@@ -201,8 +201,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_fit)
 
-    p = command("export", help="a motion.npz as BVH (skeleton) or glTF 2.0 (skinned mesh) animation")
-    p.add_argument("motion", type=Path, help="motion.npz")
+    p = command("export", help="a motion.npz as BVH (skeleton) or glTF 2.0 (skinned mesh) animation; "
+                                "a hands.npz as glTF")
+    p.add_argument("motion", type=Path, help="motion.npz or hands.npz")
     p.add_argument("--format", choices=("bvh", "gltf"), required=True)
     p.add_argument("--out", type=Path, required=True, help="file to write (.bvh; .glb binary or .gltf JSON)")
     p.add_argument("--model", type=Path, default=None, help="the body model the motion was made with (default model)")

@@ -3,7 +3,6 @@
 import importlib
 import json
 import shutil
-import struct
 
 import jax
 import numpy as np
@@ -11,12 +10,13 @@ import pytest
 
 import smplx_jax
 from conftest import load
+from gltf_util import accessor, read_glb, sampled, skinned_vertices
 from jaxmocap.export import animation, global_transforms, write_bvh, write_gltf
 from jaxmocap.export.animation import CAMERA_TO_WORLD
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from params_util import random_params
-from smplx_jax.rotations import quat_to_rotmat, rotvec_to_rotmat
+from smplx_jax.rotations import rotvec_to_rotmat
 
 T, FPS, SIZE, FOCAL = 12, 25.0, (1000.0, 800.0), 1200.0
 FORWARD = jax.jit(jax.vmap(smplx_jax.forward, in_axes=(None, 0)))
@@ -160,71 +160,32 @@ def test_end_sites_of_any_model_file(random_model_dir, monkeypatch):
     assert ends[22] @ bone > 0
 
 
-def _read_glb(path):
-    data = path.read_bytes()
-    magic, version, length = struct.unpack_from("<4sII", data)
-    assert (magic, version, length) == (b"glTF", 2, len(data))
-    json_len, json_type = struct.unpack_from("<I4s", data, 12)
-    assert json_type == b"JSON" and json_len % 4 == 0
-    doc = json.loads(data[20:20 + json_len])
-    bin_len, bin_type = struct.unpack_from("<I4s", data, 20 + json_len)
-    assert bin_type == b"BIN\0" and bin_len == doc["buffers"][0]["byteLength"]
-    return doc, data[28 + json_len: 28 + json_len + bin_len]
-
-
-def _accessor(doc, binary, index):
-    """Checks an accessor against its bufferView and the buffer, and returns its data."""
-    acc = doc["accessors"][index]
-    view = doc["bufferViews"][acc["bufferView"]]
-    dtype = {5126: np.float32, 5123: np.uint16, 5125: np.uint32}[acc["componentType"]]
-    width = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[acc["type"]]
-    assert view["byteOffset"] % 4 == 0 and view["byteOffset"] + view["byteLength"] <= len(binary)
-    assert view["byteLength"] == acc["count"] * width * np.dtype(dtype).itemsize
-    array = np.frombuffer(binary, dtype, acc["count"] * width, view["byteOffset"]).reshape(acc["count"], width)
-    if "min" in acc:
-        np.testing.assert_allclose(acc["min"], array.min(axis=0), rtol=1e-6)
-        np.testing.assert_allclose(acc["max"], array.max(axis=0), rtol=1e-6)
-    return array
-
-
 def test_gltf_is_valid_and_skins_like_the_model(case, tmp_path):
     model, params, motion = case
     anim = animation(model, motion, focal_px=FOCAL)
-    doc, binary = _read_glb(write_gltf(tmp_path / "motion.glb", model, anim))
+    doc, binary = read_glb(write_gltf(tmp_path / "motion.glb", model, anim))
     prim = doc["meshes"][0]["primitives"][0]
-    positions = _accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
-    joints = _accessor(doc, binary, prim["attributes"]["JOINTS_0"])
-    weights = _accessor(doc, binary, prim["attributes"]["WEIGHTS_0"]).astype(np.float64)
-    faces = _accessor(doc, binary, prim["indices"]).reshape(-1, 3)
+    positions = accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+    joints = accessor(doc, binary, prim["attributes"]["JOINTS_0"])
+    weights = accessor(doc, binary, prim["attributes"]["WEIGHTS_0"]).astype(np.float64)
+    faces = accessor(doc, binary, prim["indices"]).reshape(-1, 3)
     assert len(positions) == model.num_vertices and faces.max() < len(positions) and joints.max() < 55
     np.testing.assert_allclose(weights.sum(axis=1), 1, atol=1e-6)
     skin = doc["skins"][0]
     assert skin["joints"] == list(range(55)) and doc["nodes"][55]["skin"] == 0
-    ibm = _accessor(doc, binary, skin["inverseBindMatrices"]).reshape(55, 4, 4).transpose(0, 2, 1)
+    assert accessor(doc, binary, skin["inverseBindMatrices"]).shape == (55, 16)
 
-    sampled = {}
     for channel in doc["animations"][0]["channels"]:
         sampler = doc["animations"][0]["samplers"][channel["sampler"]]
-        times = _accessor(doc, binary, sampler["input"])[:, 0]
-        values = _accessor(doc, binary, sampler["output"])
-        assert len(times) == len(values) == T and times[-1] == pytest.approx((T - 1) / FPS)
-        sampled[(channel["target"]["node"], channel["target"]["path"])] = values.astype(np.float64)
-    assert len(sampled) == 56
+        times = accessor(doc, binary, sampler["input"])[:, 0]
+        assert len(times) == T and times[-1] == pytest.approx((T - 1) / FPS)
+    values = sampled(doc, binary)
+    assert len(values) == 56 and all(len(v) == T for v in values.values())
 
     vertices = np.asarray(FORWARD(model, params).vertices)
     for frame in (0, 6):
-        world = [None] * 55
-        for j in range(55):  # parents come first in SMPL-X order
-            node = doc["nodes"][j]
-            local = np.eye(4)
-            local[:3, :3] = np.asarray(quat_to_rotmat(sampled[(j, "rotation")][frame][[3, 0, 1, 2]]))
-            local[:3, 3] = sampled[(0, "translation")][frame] if j == 0 else node["translation"]
-            parent = next((p for p, n in enumerate(doc["nodes"][:55]) if j in n.get("children", [])), None)
-            world[j] = local if parent is None else world[parent] @ local
-        mats = np.array(world) @ ibm
-        blended = np.einsum("vk,vkij->vij", weights, mats[joints.astype(int)])
-        skinned = np.einsum("vij,vj->vi", blended[:, :3, :3], positions) + blended[:, :3, 3]
-        np.testing.assert_allclose(skinned, _expected_world(vertices[frame], motion, frame), atol=2e-5)
+        np.testing.assert_allclose(skinned_vertices(doc, binary, 55, frame),
+                                   _expected_world(vertices[frame], motion, frame), atol=2e-5)
 
 
 def test_gltf_passes_the_khronos_validator(case, tmp_path):

@@ -19,8 +19,10 @@ import re
 import sys
 import tempfile
 
-import addon_utils  # noqa: E402
 import bpy  # first: it puts Blender's own modules (addon_utils) on the path
+
+# isort: split
+import addon_utils
 
 _NOISE = re.compile(r"zero length|warn|error|fail|traceback|exception", re.IGNORECASE)
 

@@ -37,17 +37,17 @@ MIN_BONE_LENGTH = 0.005  # metres; a leaf whose tip is nearer than this continue
 
 @dataclass(frozen=True)
 class Animation:
-    """``T`` frames of the 55-joint skeleton: local rotations (the root's relative to the world), the root's
-    world position, and the rest skeleton of the motion's mean shape."""
+    """``T`` frames of a skeleton of ``J`` joints (SMPL-X's 55, or a hand's 16): local rotations (the root's
+    relative to the world), the root's world position, and the rest skeleton of the motion's mean shape."""
 
     names: tuple[str, ...]
     parents: tuple[int, ...]
-    rest_joints: np.ndarray  # (55, 3) rest-pose joint positions, metres
-    local_rotmats: np.ndarray  # (T, 55, 3, 3)
+    rest_joints: np.ndarray  # (J, 3) rest-pose joint positions, metres
+    local_rotmats: np.ndarray  # (T, J, 3, 3)
     root_positions: np.ndarray  # (T, 3) world position of joint 0
     betas: np.ndarray  # (B,) the mean shape over valid frames
     fps: float
-    end_sites: np.ndarray  # (55, 3) rest-pose offset from each joint without children to its bone's end; 0 for others
+    end_sites: np.ndarray  # (J, 3) rest-pose offset from each joint without children to its bone's end; 0 for others
 
 
 def rest_keypoints(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
@@ -76,7 +76,7 @@ def end_sites(model: smplx_jax.BodyModel, betas: np.ndarray, rest_joints: np.nda
     return offsets
 
 
-def _held(valid: np.ndarray) -> np.ndarray:
+def held_frames(valid: np.ndarray) -> np.ndarray:
     """For each frame, the index of the nearest earlier valid frame (the first valid one before any)."""
     if not valid.any():
         raise ValueError("the motion has no valid frame to export")
@@ -85,10 +85,20 @@ def _held(valid: np.ndarray) -> np.ndarray:
     return np.where(index < 0, np.argmax(valid), index)
 
 
+def weak_perspective_origin(camera_scale, camera_trans, image_size, focal_px: float | None = None) -> np.ndarray:
+    """(T, 3) where a weak-perspective camera (``camera_scale (T,)``, ``camera_trans (T, 2)``) puts the model's
+    origin in the camera frame: at depth ``focal / camera_scale``, in front of its pixel ``camera_trans``."""
+    width, height = np.asarray(image_size, np.float64)
+    focal = float(np.hypot(width, height)) if focal_px is None else focal_px
+    scale = np.asarray(camera_scale, np.float64)
+    return np.concatenate([(np.asarray(camera_trans, np.float64) - [width / 2, height / 2]) / scale[:, None],
+                           (focal / scale)[:, None]], axis=1)
+
+
 def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None) -> Animation:
     """The world-frame animation of a motion; invalid frames hold the previous valid frame's pose."""
     valid = np.asarray(motion["valid"], bool)
-    held = _held(valid)
+    held = held_frames(valid)
     betas = np.asarray(motion["betas"], np.float64)[valid].mean(axis=0)
     num = betas.shape[0]
     rest_joints = np.asarray(model.joint_template, np.float64) + np.asarray(model.joint_shapedirs)[..., :num] @ betas
@@ -96,13 +106,8 @@ def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None)
     local = np.asarray(rotvec_to_rotmat(full_pose), np.float64)
     local[:, 0] = CAMERA_TO_WORLD @ local[:, 0]
 
-    width, height = np.asarray(motion["image_size"], np.float64)
-    focal = float(np.hypot(width, height)) if focal_px is None else focal_px
-    scale = np.asarray(motion["camera_scale"], np.float64)[held]
-    origin = np.concatenate([
-        (np.asarray(motion["camera_trans"], np.float64)[held] - [width / 2, height / 2]) / scale[:, None],
-        (focal / scale)[:, None],
-    ], axis=1) if lens(motion)[0] is None else 0.0  # the body model's origin in the camera frame
+    origin = weak_perspective_origin(np.asarray(motion["camera_scale"])[held], np.asarray(motion["camera_trans"])[held],
+                                     motion["image_size"], focal_px) if lens(motion)[0] is None else 0.0
     root_camera = origin + np.asarray(motion["transl"], np.float64)[held] + rest_joints[0]
     return Animation(
         names=constants.JOINT_NAMES, parents=model.parents, rest_joints=rest_joints, local_rotmats=local,
@@ -111,7 +116,7 @@ def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None)
 
 
 def global_transforms(anim: Animation) -> tuple[np.ndarray, np.ndarray]:
-    """World rotations (T, 55, 3, 3) and positions (T, 55, 3) of every joint."""
+    """World rotations (T, J, 3, 3) and positions (T, J, 3) of every joint."""
     rot = np.zeros_like(anim.local_rotmats)
     pos = np.zeros(anim.local_rotmats.shape[:2] + (3,))
     rot[:, 0], pos[:, 0] = anim.local_rotmats[:, 0], anim.root_positions

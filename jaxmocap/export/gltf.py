@@ -1,6 +1,6 @@
 """glTF 2.0 export (binary ``.glb``, or ``.gltf`` JSON): the body mesh of the motion's mean shape, skinned to the
 55-joint skeleton (four strongest joints per vertex), with one animation; glTF viewers in browsers and Blender
-play it.
+play it. `write_meshes` writes any skinned meshes so (the hands: `jaxmocap.export.hands_gltf`).
 
 Pose-corrective blend shapes are not exported (glTF skinning cannot express them); for the default body model
 they are zero, so the file reproduces the model exactly.
@@ -9,6 +9,8 @@ they are zero, so the file reproduces the model exactly.
 import base64
 import json
 import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -72,52 +74,78 @@ class _Buffer:
         return len(self.accessors) - 1
 
 
-def gltf_document(model: smplx_jax.BodyModel, anim: Animation) -> tuple[dict, bytes]:
-    """The glTF JSON document and its binary buffer."""
-    num_joints = len(anim.parents)
-    vertices = rest_mesh(model, anim.betas)
-    faces = np.asarray(model.faces)
-    joints, weights = top_weights(np.asarray(model.weights_t, np.float64).T)
+@dataclass(frozen=True)
+class SkinnedMesh:
+    """A mesh in its rest pose, skinned to the skeleton of an animation."""
+
+    name: str
+    vertices: np.ndarray  # (V, 3) rest pose, metres
+    faces: np.ndarray  # (F, 3)
+    weights: np.ndarray  # (V, J) skinning weights on the animation's joints
+    anim: Animation
+
+
+def body_mesh(model: smplx_jax.BodyModel, anim: Animation) -> SkinnedMesh:
+    """The body of the animation's mean shape."""
+    return SkinnedMesh("body", rest_mesh(model, anim.betas), np.asarray(model.faces),
+                       np.asarray(model.weights_t, np.float64).T, anim)
+
+
+def gltf_document(meshes: Sequence[SkinnedMesh]) -> tuple[dict, bytes]:
+    """The glTF JSON document and its binary buffer: one scene with each mesh and its skeleton, and one animation
+    of them all (the animations share their frames and frame rate)."""
     buf = _Buffer()
-    attributes = {
-        "POSITION": buf.add(vertices.astype(np.float32), FLOAT, ARRAY_BUFFER, bounds=True),
-        "NORMAL": buf.add(vertex_normals(vertices, faces).astype(np.float32), FLOAT, ARRAY_BUFFER),
-        "JOINTS_0": buf.add(joints.astype(np.uint16), USHORT, ARRAY_BUFFER),
-        "WEIGHTS_0": buf.add(weights, FLOAT, ARRAY_BUFFER),
-    }
-    indices = buf.add(faces.reshape(-1).astype(np.uint32), UINT, ELEMENT_ARRAY_BUFFER, bounds=True)
-    inverse_bind = np.tile(np.eye(4), (num_joints, 1, 1))
-    inverse_bind[:, :3, 3] = -anim.rest_joints
-    ibm = buf.add(inverse_bind.transpose(0, 2, 1).reshape(num_joints, 16).astype(np.float32), FLOAT)
+    nodes, scene, mesh_docs, skins, roots = [], [], [], [], []
+    for k, mesh in enumerate(meshes):
+        anim, num_joints = mesh.anim, len(mesh.anim.parents)
+        joints, weights = top_weights(mesh.weights)
+        attributes = {
+            "POSITION": buf.add(mesh.vertices.astype(np.float32), FLOAT, ARRAY_BUFFER, bounds=True),
+            "NORMAL": buf.add(vertex_normals(mesh.vertices, mesh.faces).astype(np.float32), FLOAT, ARRAY_BUFFER),
+            "JOINTS_0": buf.add(joints.astype(np.uint16), USHORT, ARRAY_BUFFER),
+            "WEIGHTS_0": buf.add(weights, FLOAT, ARRAY_BUFFER),
+        }
+        indices = buf.add(mesh.faces.reshape(-1).astype(np.uint32), UINT, ELEMENT_ARRAY_BUFFER, bounds=True)
+        inverse_bind = np.tile(np.eye(4), (num_joints, 1, 1))
+        inverse_bind[:, :3, 3] = -anim.rest_joints
+        ibm = buf.add(inverse_bind.transpose(0, 2, 1).reshape(num_joints, 16).astype(np.float32), FLOAT)
 
-    times = buf.add((np.arange(len(anim.local_rotmats)) / anim.fps).astype(np.float32), FLOAT, bounds=True)
+        root = len(nodes)
+        for j in range(num_joints):
+            offset = anim.rest_joints[j] - (anim.rest_joints[anim.parents[j]] if j else 0.0)
+            node = {"name": anim.names[j], "translation": offset.tolist()}
+            children = [root + c for c in range(num_joints) if anim.parents[c] == j]
+            if children:
+                node["children"] = children
+            nodes.append(node)
+        nodes.append({"name": mesh.name, "mesh": k, "skin": k})
+        scene += [root, len(nodes) - 1]
+        roots.append(root)
+        mesh_docs.append({"name": mesh.name, "primitives": [
+            {"attributes": attributes, "indices": indices, "material": 0}]})
+        skins.append({"joints": list(range(root, root + num_joints)), "inverseBindMatrices": ibm, "skeleton": root})
+
+    first = meshes[0].anim
+    times = buf.add((np.arange(len(first.local_rotmats)) / first.fps).astype(np.float32), FLOAT, bounds=True)
     samplers, channels = [], []
-    for j in range(num_joints):
-        rotations = buf.add(_quaternions_xyzw(anim.local_rotmats[:, j]).astype(np.float32), FLOAT)
-        samplers.append({"input": times, "output": rotations, "interpolation": "LINEAR"})
-        channels.append({"sampler": j, "target": {"node": j, "path": "rotation"}})
-    samplers.append({"input": times, "output": buf.add(anim.root_positions.astype(np.float32), FLOAT),
-                     "interpolation": "LINEAR"})
-    channels.append({"sampler": num_joints, "target": {"node": 0, "path": "translation"}})
+    for mesh, root in zip(meshes, roots):
+        for j in range(len(mesh.anim.parents)):
+            rotations = buf.add(_quaternions_xyzw(mesh.anim.local_rotmats[:, j]).astype(np.float32), FLOAT)
+            channels.append({"sampler": len(samplers), "target": {"node": root + j, "path": "rotation"}})
+            samplers.append({"input": times, "output": rotations, "interpolation": "LINEAR"})
+        channels.append({"sampler": len(samplers), "target": {"node": root, "path": "translation"}})
+        samplers.append({"input": times, "output": buf.add(mesh.anim.root_positions.astype(np.float32), FLOAT),
+                         "interpolation": "LINEAR"})
 
-    nodes = []
-    for j in range(num_joints):
-        offset = anim.rest_joints[j] - (anim.rest_joints[anim.parents[j]] if j else 0.0)
-        node = {"name": anim.names[j], "translation": offset.tolist()}
-        children = [c for c in range(num_joints) if anim.parents[c] == j]
-        if children:
-            node["children"] = children
-        nodes.append(node)
-    nodes.append({"name": "body", "mesh": 0, "skin": 0})
     document = {
         "asset": {"version": "2.0", "generator": "jaxmocap"},
         "scene": 0,
-        "scenes": [{"nodes": [0, num_joints]}],
+        "scenes": [{"nodes": scene}],
         "nodes": nodes,
-        "meshes": [{"name": "body", "primitives": [{"attributes": attributes, "indices": indices, "material": 0}]}],
+        "meshes": mesh_docs,
         "materials": [{"name": "skin", "pbrMetallicRoughness": {
             "baseColorFactor": [0.85, 0.68, 0.58, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8}}],
-        "skins": [{"joints": list(range(num_joints)), "inverseBindMatrices": ibm, "skeleton": 0}],
+        "skins": skins,
         "animations": [{"name": "motion", "samplers": samplers, "channels": channels}],
         "accessors": buf.accessors,
         "bufferViews": buf.views,
@@ -126,9 +154,9 @@ def gltf_document(model: smplx_jax.BodyModel, anim: Animation) -> tuple[dict, by
     return document, b"".join(buf.chunks)
 
 
-def write_gltf(path, model: smplx_jax.BodyModel, anim: Animation) -> Path:
+def write_meshes(path, meshes: Sequence[SkinnedMesh]) -> Path:
     """Write glTF atomically: binary (``.glb``) unless the name ends in ``.gltf`` (JSON, buffer embedded)."""
-    document, binary = gltf_document(model, anim)
+    document, binary = gltf_document(meshes)
     if Path(path).suffix.lower() == ".gltf":
         document["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(binary).decode()
         return atomic_write_text(path, json.dumps(document, separators=(",", ":")))
@@ -138,3 +166,8 @@ def write_gltf(path, model: smplx_jax.BodyModel, anim: Animation) -> Path:
     header = struct.pack("<4sII", b"glTF", 2, length)
     chunks = struct.pack("<I4s", len(text), b"JSON") + text + struct.pack("<I4s", len(binary), b"BIN\0") + binary
     return atomic_write_bytes(path, header + chunks)
+
+
+def write_gltf(path, model: smplx_jax.BodyModel, anim: Animation) -> Path:
+    """Write the body of a motion's animation as glTF (`write_meshes`)."""
+    return write_meshes(path, [body_mesh(model, anim)])
