@@ -24,13 +24,16 @@ def person_colour(person_id: int) -> tuple[int, int, int]:
 
 @dataclass(frozen=True)
 class Posed:
-    """One person in one frame: identity, posed vertices ``(V, 3)`` (``transl`` included, the image-aligned frame of
-    motion.npz) and the weak-perspective camera."""
+    """One person (or hand) in one frame: identity, posed vertices ``(V, 3)`` (``transl`` included, the
+    image-aligned frame of motion.npz) and the weak-perspective camera; ``faces`` of its own mesh (default: those
+    of the drawing's model) and the ``label`` drawn above it (default: the identity)."""
 
     person_id: int
     vertices: np.ndarray
     camera_scale: float
     camera_trans: np.ndarray
+    faces: np.ndarray | None = None
+    label: str | None = None
 
 
 def mesh_pixels(vertices: np.ndarray, camera_scale: float, camera_trans: np.ndarray,
@@ -65,10 +68,11 @@ def people_over_frame(frame: np.ndarray, people: list[Posed], faces: np.ndarray,
     unit = float(np.median(np.concatenate([p.vertices[:, 2] for p in people])))
     points = [mesh_pixels(p.vertices, p.camera_scale, p.camera_trans, focal_length, principal_point, unit) * scale
               for p in people]
-    drawn = draw_mesh(image, *_joined(points, faces, [person_colour(p.person_id) for p in people]), opacity=0.75)
+    drawn = draw_mesh(image, *_joined(points, people, faces), opacity=0.75)
     for person, xyz in zip(people if labels else (), points):
         top = xyz[np.argmin(xyz[:, 1]), :2]
-        cv2.putText(drawn, str(person.person_id), (int(top[0]) - 10, int(top[1]) - 12), cv2.FONT_HERSHEY_SIMPLEX,
+        label = str(person.person_id) if person.label is None else person.label
+        cv2.putText(drawn, label, (int(top[0]) - 10, int(top[1]) - 12), cv2.FONT_HERSHEY_SIMPLEX,
                     1.2, person_colour(person.person_id), 3, cv2.LINE_AA)
     return drawn
 
@@ -82,11 +86,15 @@ def shrunk(frame: np.ndarray, scale: float) -> np.ndarray:
     return cv2.resize(frame, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
 
 
-def _joined(points: list[np.ndarray], faces: np.ndarray, colours: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Several meshes of the same faces as one: stacked points, offset faces and a colour per face."""
-    count = len(points[0])
-    joined_faces = np.concatenate([faces + k * count for k in range(len(points))])
-    return np.concatenate(points), joined_faces, np.repeat(np.asarray(colours, np.float64), len(faces), axis=0)
+def _joined(points: list[np.ndarray], people: list[Posed], faces: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The people's meshes as one: stacked points, offset faces (each one's own, else ``faces``) and a colour per
+    face (each one's identity's)."""
+    own = [faces if p.faces is None else p.faces for p in people]
+    offsets = np.cumsum([0] + [len(x) for x in points[:-1]])
+    joined_faces = np.concatenate([f + k for f, k in zip(own, offsets)])
+    colours = np.concatenate([np.repeat([person_colour(p.person_id)], len(f), axis=0) for p, f in zip(people, own)])
+    return np.concatenate(points), joined_faces, colours.astype(np.float64)
 
 
 def upright(up: np.ndarray) -> np.ndarray:
@@ -118,8 +126,7 @@ def side_view(people: list[Posed], faces: np.ndarray, size: tuple[int, int], pix
         turned = (person.vertices - centre) @ (_TURN @ level).T * (pixels_per_metre * detail)
         points.append(np.concatenate([turned[:, :2] + [small[0] / 2, small[1] / 2], turned[:, 2:]], axis=1))
     background = np.full((small[1], small[0], 3), 235, np.uint8)
-    image = draw_mesh(background, *_joined(points, faces, [person_colour(p.person_id) for p in people])) if people \
-        else background
+    image = draw_mesh(background, *_joined(points, people, faces)) if people else background
     return cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
 
 

@@ -47,9 +47,10 @@ def hand21(hand: np.ndarray | None, confidence: float) -> np.ndarray:
     return out
 
 
-def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray, person_ids=None) -> Path:
+def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray, person_ids=None, body: bool = True) -> Path:
     """Write (P, 67, 3) keypoints as one OpenPose 1.3 JSON file, atomically, each person with the ``person_id``
-    OpenPose's tracker writes (``[id]``; ``[-1]`` untracked, as OpenPose without its tracker). Returns the path."""
+    OpenPose's tracker writes (``[id]``; ``[-1]`` untracked, as OpenPose without its tracker); without ``body``
+    hands only, ``"pose_keypoints_2d": []`` as OpenPose writes it with ``--body 0``. Returns the path."""
     keypoints = np.asarray(keypoints, dtype=np.float64)
     if keypoints.ndim != 3 or keypoints.shape[1:] != (NUM_KEYPOINTS, 3):
         raise ValueError(f"keypoints must have shape (num_people, 67, 3), got {keypoints.shape}")
@@ -58,7 +59,7 @@ def write_openpose_json(path: str | os.PathLike, keypoints: np.ndarray, person_i
         raise ValueError(f"{len(person_ids)} person ids for {len(keypoints)} people")
     people = [{
         "person_id": [person_id],
-        "pose_keypoints_2d": _flat(p[BODY_SLICE]),
+        "pose_keypoints_2d": _flat(p[BODY_SLICE]) if body else [],
         "hand_left_keypoints_2d": _flat(p[LEFT_HAND_SLICE]),
         "hand_right_keypoints_2d": _flat(p[RIGHT_HAND_SLICE]),
         "face_keypoints_2d": [],

@@ -76,10 +76,12 @@ def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
     return jnp.asarray(theta, dtype)
 
 
-def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig) -> FitResult:
+def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig, free=None,
+            fit_betas=None) -> FitResult:
     """`fit_frame` of one frame from its full pose ``(55, 3)`` with its keypoint model ``km`` made beforehand
     (`openpose_keypoint_model`); ``camera`` (3,) or None (fitted to the start); ``lens`` (`lens_arrays`):
-    (1 / focal length, principal point), 1 / focal length 0 for weak perspective."""
+    (1 / focal length, principal point), 1 / focal length 0 for weak perspective; ``free`` (55,) 1 for the joints
+    fitted (default all), ``fit_betas`` 1 to fit the shape (default)."""
     dtype = pose.dtype
     inv_focal, center = lens
     finite = jnp.all(jnp.isfinite(keypoints), axis=-1)
@@ -91,7 +93,8 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
         camera = jnp.concatenate([scale[None], trans])
     sref = jnp.where(jnp.isfinite(camera[0]) & (camera[0] > 0), camera[0], 1.0)
     problem = least_squares.Problem(km, target, conf, pose, betas, jnp.asarray(prior_weights(config), dtype), sref,
-                                    jnp.ones(55, dtype), jnp.ones((), dtype), inv_focal, center)
+                                    jnp.ones(55, dtype) if free is None else free,
+                                    jnp.ones((), dtype) if fit_betas is None else fit_betas, inv_focal, center)
     start = least_squares.Unknowns(pose, betas, jnp.concatenate([jnp.log(sref)[None], camera[1:]]))
     solution = least_squares.solve(problem, start, config)
     out = solution.value

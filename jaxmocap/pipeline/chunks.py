@@ -12,10 +12,12 @@ from jaxmocap.pipeline.records import Chunk
 
 
 class ChunkStore:
-    """``<out>/.jaxmocap_chunks/``: ``settings.json`` and ``chunk_<k>.npz``. Settings (`config.chunk_key`) that
-    differ from the stored ones (another input, range, model or option) discard the stored chunks."""
+    """``<out>/.jaxmocap_chunks/``: ``settings.json`` and ``chunk_<k>.npz``, each a ``record`` (`Chunk`, or another
+    class with ``arrays()`` and ``from_arrays``). Settings (`config.chunk_key`) that differ from the stored ones
+    (another input, range, model or option) discard the stored chunks."""
 
-    def __init__(self, out_dir: Path, settings: dict):
+    def __init__(self, out_dir: Path, settings: dict, record=Chunk):
+        self.record = record
         self.folder = Path(out_dir) / ".jaxmocap_chunks"
         stored = self.folder / "settings.json"
         text = json.dumps(settings, sort_keys=True)
@@ -27,14 +29,14 @@ class ChunkStore:
     def _path(self, index: int) -> Path:
         return self.folder / f"chunk_{index:06d}.npz"
 
-    def load(self, index: int) -> Chunk | None:
+    def load(self, index: int):
         path = self._path(index)
         if not path.is_file():
             return None
         with np.load(path, allow_pickle=False) as data:
-            return Chunk.from_arrays({k: data[k] for k in data.files})
+            return self.record.from_arrays({k: data[k] for k in data.files})
 
-    def save(self, index: int, chunk: Chunk) -> None:
+    def save(self, index: int, chunk) -> None:
         buffer = io.BytesIO()
         np.savez(buffer, **chunk.arrays())
         atomic_write_bytes(self._path(index), buffer.getvalue())

@@ -1,0 +1,154 @@
+"""Hands on their own, no body needed, as mediapipe's hand solution finds them: palms over the whole image, up to
+``max_hands``, each tracked from its own landmarks in a video, with its side from the handedness model.
+
+    hands = HandTracker(static_image_mode=True)(cv2.imread("hand.jpg"))   # [Hand(side="left", ...)]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .detector import as_bgr
+from .hands import MIN_PALM_SCORE, MIN_PRESENCE, HandEstimator, HandResult
+from .models import ensure_models
+from .pose import rect_iou
+from .roi import Rect
+
+SIDES = ("left", "right")
+
+
+@dataclass(frozen=True)
+class Hand:
+    """One hand in one image. ``hand_id``: its track (kept while tracked in a video; in a still, the order found);
+    ``side``: ``"left"`` or ``"right"`` (the person's); ``keypoints (21, 3)``: pixels x, y and z in x's scale,
+    OpenPose hand order; ``world (21, 3)``: metres; ``score``: presence; ``right_score``: the handedness model's
+    probability of a right hand in this image; ``box``: pixels x0, y0, x1, y1."""
+
+    hand_id: int
+    side: str
+    keypoints: np.ndarray
+    world: np.ndarray
+    score: float
+    right_score: float
+    box: np.ndarray
+
+
+@dataclass
+class _Track:
+    hand_id: int
+    result: HandResult
+    right_total: float  # sum of the handedness model's right scores over the frames tracked
+    frames: int
+
+    @property
+    def right_mean(self) -> float:
+        return self.right_total / self.frames
+
+
+class HandTracker:
+    """Palm detector and hand landmark model over whole images.
+
+    ``static_image_mode=True``: every call is an unrelated image (palm detection, then the landmarks, refined once
+    from their own box). ``False``: a video; each hand's next box comes from its landmarks, and the palm detector
+    runs while fewer than ``max_hands`` are tracked, at once when none is and then every ``redetect_every`` frames.
+    A hand's side is its handedness averaged over the frames it is tracked; of two hands taken for the same side,
+    the one less likely so gets the other (two hands in view are mostly one person's pair).
+    """
+
+    def __init__(self, static_image_mode: bool = True, max_hands: int = 2, model_dir=None, num_threads: int = 2,
+                 min_detection_confidence: float = MIN_PALM_SCORE, min_tracking_confidence: float = MIN_PRESENCE,
+                 redetect_every: int = 6):
+        if max_hands < 1:
+            raise ValueError(f"max_hands must be >= 1, got {max_hands}")
+        paths = ensure_models(model_dir)
+        self.static_image_mode = static_image_mode
+        self.max_hands = max_hands
+        self.min_detection_confidence = min_detection_confidence
+        self.min_tracking_confidence = min_tracking_confidence
+        self.redetect_every = redetect_every
+        self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
+                                    paths["hand_recrop.tflite"], num_threads)
+        self._tracks: list[_Track] = []
+        self._frame = 0
+        self._next_id = 0
+
+    def reset(self) -> None:
+        """Forget the tracked hands (start of a new video)."""
+        self._tracks, self._frame, self._next_id = [], 0, 0
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The tracked hands as arrays; `restore` continues from them as this tracker would."""
+        out = {"frame": np.asarray(self._frame), "next_id": np.asarray(self._next_id),
+               "hand_id": np.asarray([t.hand_id for t in self._tracks], np.int64),
+               "right_total": np.asarray([t.right_total for t in self._tracks], np.float64),
+               "frames": np.asarray([t.frames for t in self._tracks], np.int64)}
+        for name in HandResult._fields:
+            values = [np.asarray(getattr(t.result, name), np.float64) for t in self._tracks]
+            out[f"result_{name}"] = np.asarray(values) if values else np.zeros((0,))
+        return out
+
+    def restore(self, state: dict[str, np.ndarray]) -> None:
+        """Continue from a `state`."""
+        def result(k):
+            fields = {name: state[f"result_{name}"][k] for name in HandResult._fields}
+            return HandResult(**{name: Rect(*map(float, v)) if name.endswith("roi") else v if v.ndim else float(v)
+                                 for name, v in fields.items()})
+
+        self._tracks = [_Track(int(state["hand_id"][k]), result(k), float(state["right_total"][k]),
+                               int(state["frames"][k])) for k in range(len(state["hand_id"]))]
+        self._frame, self._next_id = int(state["frame"]), int(state["next_id"])
+
+    def _found(self, image: np.ndarray, known: list[HandResult], refine: bool) -> list[HandResult]:
+        """New hands from the palm detector, best first, none where a known hand is."""
+        size = (image.shape[1], image.shape[0])
+        found = list(known)
+        for det in self._hands.detect(image, self.min_detection_confidence):
+            if len(found) >= self.max_hands:
+                break
+            roi = self._hands.detection_roi(det, size)
+            if any(rect_iou(roi, h.roi) > 0.5 or rect_iou(roi, h.next_roi) > 0.5 for h in found):
+                continue
+            hand = self._hands.landmarks(image, roi, self.min_tracking_confidence)
+            if hand is not None and refine:
+                hand = self._hands.landmarks(image, hand.next_roi, self.min_tracking_confidence) or hand
+            if hand is not None and not any(rect_iou(hand.next_roi, h.next_roi) > 0.5 for h in found):
+                found.append(hand)
+        return found[len(known):]
+
+    def _tracked(self, image: np.ndarray) -> list[_Track]:
+        if self.static_image_mode:
+            return [_Track(k, h, h.right_score, 1) for k, h in enumerate(self._found(image, [], refine=True))]
+        tracks = []
+        for track in self._tracks:
+            hand = self._hands.landmarks(image, track.result.next_roi, self.min_tracking_confidence)
+            if hand is None or any(rect_iou(hand.next_roi, t.result.next_roi) > 0.5 for t in tracks):
+                continue
+            tracks.append(_Track(track.hand_id, hand, track.right_total + hand.right_score, track.frames + 1))
+        if len(tracks) < self.max_hands and (not tracks or self._frame % self.redetect_every == 0):
+            for hand in self._found(image, [t.result for t in tracks], refine=False):
+                tracks.append(_Track(self._next_id, hand, hand.right_score, 1))
+                self._next_id += 1
+        return tracks
+
+    def __call__(self, image_bgr: np.ndarray) -> list[Hand]:
+        """The hands in one BGR (or grayscale / BGRA) image, by ``hand_id``; in a video, its next frame."""
+        image = as_bgr(image_bgr)
+        tracks = self._tracked(image)
+        if not self.static_image_mode:
+            self._tracks = tracks
+            self._frame += 1
+        sides = [SIDES[t.right_mean > 0.5] for t in tracks]
+        if len(tracks) == 2 and sides[0] == sides[1]:
+            more_right = int(tracks[1].right_mean > tracks[0].right_mean)
+            sides = ["left", "left"]
+            sides[more_right] = "right"
+        w, h = image.shape[1], image.shape[0]
+        hands = []
+        for track, side in zip(tracks, sides):
+            pixels = track.result.landmarks * (w, h, w)
+            box = np.concatenate([pixels[:, :2].min(0), pixels[:, :2].max(0)])
+            hands.append(Hand(track.hand_id, side, pixels, track.result.world, track.result.presence,
+                              track.result.right_score, box))
+        return sorted(hands, key=lambda hand: hand.hand_id)
