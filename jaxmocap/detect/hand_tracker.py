@@ -41,6 +41,7 @@ class _Track:
     result: HandResult
     right_total: float  # sum of the handedness model's right scores over the frames tracked
     frames: int
+    last_seen: int = 0  # the frame it was last seen in
 
     @property
     def right_mean(self) -> float:
@@ -53,13 +54,15 @@ class HandTracker:
     ``static_image_mode=True``: every call is an unrelated image (palm detection, then the landmarks, refined once
     from their own box). ``False``: a video; each hand's next box comes from its landmarks, and the palm detector
     runs while fewer than ``max_hands`` are tracked, at once when none is and then every ``redetect_every`` frames.
-    A hand's side is its handedness averaged over the frames it is tracked; of two hands taken for the same side,
-    the one less likely so gets the other (two hands in view are mostly one person's pair).
+    A hand found again within ``remember`` frames of losing it, near where it was (its centre within its size),
+    takes up its identity and handedness. A hand's side is its handedness averaged over the frames it is tracked;
+    of two hands taken for the same side, the one less likely so gets the other (two hands in view are mostly one
+    person's pair).
     """
 
     def __init__(self, static_image_mode: bool = True, max_hands: int = 2, model_dir=None, num_threads: int = 2,
                  min_detection_confidence: float = MIN_PALM_SCORE, min_tracking_confidence: float = MIN_PRESENCE,
-                 redetect_every: int = 6):
+                 redetect_every: int = 6, remember: int = 30):
         if max_hands < 1:
             raise ValueError(f"max_hands must be >= 1, got {max_hands}")
         paths = ensure_models(model_dir)
@@ -68,24 +71,27 @@ class HandTracker:
         self.min_detection_confidence = min_detection_confidence
         self.min_tracking_confidence = min_tracking_confidence
         self.redetect_every = redetect_every
+        self.remember = remember
         self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
                                     paths["hand_recrop.tflite"], num_threads)
         self._tracks: list[_Track] = []
+        self._lost: list[_Track] = []  # lost within `remember` frames
         self._frame = 0
         self._next_id = 0
 
     def reset(self) -> None:
         """Forget the tracked hands (start of a new video)."""
-        self._tracks, self._frame, self._next_id = [], 0, 0
+        self._tracks, self._lost, self._frame, self._next_id = [], [], 0, 0
 
     def state(self) -> dict[str, np.ndarray]:
-        """The tracked hands as arrays; `restore` continues from them as this tracker would."""
+        """The tracked (and lately lost) hands as arrays; `restore` continues from them as this tracker would."""
+        tracks = self._tracks + self._lost
         out = {"frame": np.asarray(self._frame), "next_id": np.asarray(self._next_id),
-               "hand_id": np.asarray([t.hand_id for t in self._tracks], np.int64),
-               "right_total": np.asarray([t.right_total for t in self._tracks], np.float64),
-               "frames": np.asarray([t.frames for t in self._tracks], np.int64)}
+               "tracked": np.asarray(len(self._tracks))}
+        for name in ("hand_id", "right_total", "frames", "last_seen"):
+            out[name] = np.asarray([getattr(t, name) for t in tracks], np.float64)
         for name in HandResult._fields:
-            values = [np.asarray(getattr(t.result, name), np.float64) for t in self._tracks]
+            values = [np.asarray(getattr(t.result, name), np.float64) for t in tracks]
             out[f"result_{name}"] = np.asarray(values) if values else np.zeros((0,))
         return out
 
@@ -96,8 +102,10 @@ class HandTracker:
             return HandResult(**{name: Rect(*map(float, v)) if name.endswith("roi") else v if v.ndim else float(v)
                                  for name, v in fields.items()})
 
-        self._tracks = [_Track(int(state["hand_id"][k]), result(k), float(state["right_total"][k]),
-                               int(state["frames"][k])) for k in range(len(state["hand_id"]))]
+        tracks = [_Track(int(state["hand_id"][k]), result(k), float(state["right_total"][k]),
+                         int(state["frames"][k]), int(state["last_seen"][k])) for k in range(len(state["hand_id"]))]
+        tracked = int(state["tracked"])
+        self._tracks, self._lost = tracks[:tracked], tracks[tracked:]
         self._frame, self._next_id = int(state["frame"]), int(state["next_id"])
 
     def _found(self, image: np.ndarray, known: list[HandResult], refine: bool) -> list[HandResult]:
@@ -120,16 +128,25 @@ class HandTracker:
     def _tracked(self, image: np.ndarray) -> list[_Track]:
         if self.static_image_mode:
             return [_Track(k, h, h.right_score, 1) for k, h in enumerate(self._found(image, [], refine=True))]
-        tracks = []
+        tracks, lost = [], [t for t in self._lost if self._frame - t.last_seen <= self.remember]
         for track in self._tracks:
             hand = self._hands.landmarks(image, track.result.next_roi, self.min_tracking_confidence)
             if hand is None or any(rect_iou(hand.next_roi, t.result.next_roi) > 0.5 for t in tracks):
+                lost.append(track)
                 continue
-            tracks.append(_Track(track.hand_id, hand, track.right_total + hand.right_score, track.frames + 1))
+            tracks.append(_Track(track.hand_id, hand, track.right_total + hand.right_score, track.frames + 1,
+                                 self._frame))
         if len(tracks) < self.max_hands and (not tracks or self._frame % self.redetect_every == 0):
             for hand in self._found(image, [t.result for t in tracks], refine=False):
-                tracks.append(_Track(self._next_id, hand, hand.right_score, 1))
-                self._next_id += 1
+                before = _nearest(lost, hand, (image.shape[1], image.shape[0]))
+                if before is None:
+                    tracks.append(_Track(self._next_id, hand, hand.right_score, 1, self._frame))
+                    self._next_id += 1
+                else:
+                    lost.remove(before)
+                    tracks.append(_Track(before.hand_id, hand, before.right_total + hand.right_score,
+                                         before.frames + 1, self._frame))
+        self._lost = lost
         return tracks
 
     def __call__(self, image_bgr: np.ndarray) -> list[Hand]:
@@ -152,3 +169,15 @@ class HandTracker:
             hands.append(Hand(track.hand_id, side, pixels, track.result.world, track.result.presence,
                               track.result.right_score, box))
         return sorted(hands, key=lambda hand: hand.hand_id)
+
+
+def _nearest(lost: list[_Track], hand: HandResult, image_size: tuple[int, int]) -> _Track | None:
+    """The lost track nearest ``hand`` whose centre was within its size of the hand's, or None."""
+    w, h = image_size
+
+    def distance(track):
+        a, b = track.result.next_roi, hand.next_roi
+        return np.hypot((a.x_center - b.x_center) * w, (a.y_center - b.y_center) * h) / max(a.width * w, 1e-9)
+
+    near = [t for t in lost if distance(t) < 1.0]
+    return min(near, key=distance, default=None)

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from jaxmocap.batching import map_in_buckets
 from jaxmocap.integrate.fitting import OK, FitConfig, fit_one
@@ -33,7 +33,7 @@ WRIST = {"left": constants.LEFT_WRIST, "right": constants.RIGHT_WRIST}
 FINGERS = {"left": slice(25, 40), "right": slice(40, 55)}
 HAND21 = {"left": constants.LEFT_HAND21_FROM_SMPLX, "right": constants.RIGHT_HAND21_FROM_SMPLX}
 FREE = {"left": LEFT_HAND_IK_JOINTS, "right": RIGHT_HAND_IK_JOINTS}
-BUCKETS = (8, 64)  # padded batch sizes: few, as each compiles the solver once (~30 s on 2 cores)
+BUCKETS = (64,)  # one padded batch size: tracing the two solves takes ~12 s, so one compiled fit serves all
 PALM = (0, 5, 9, 13, 17)  # wrist and the four knuckles (OpenPose hand order): the palm, nearly rigid
 
 HAND_IK = IKConfig()  # the whole-body path's hand IK settings
@@ -68,55 +68,83 @@ def palm_rotation(model_palm: Float[Array, "5 3"], target_palm: Float[Array, "5 
     return u @ jnp.diag(jnp.array([1.0, 1.0, 1.0], a.dtype).at[2].set(d)) @ vt
 
 
-def hand_ik_one(km: KeypointModel, side: str, world, world_conf, ik_config=HAND_IK) -> Float[Array, "55 3"]:
-    """The pose (55, 3; the body at rest) whose ``side`` hand best matches ``world (21, 3)``, metric landmarks in
-    image-aligned axes (x right, y down) with confidence ``world_conf (21,)``, up to a scale and an offset: the
-    wrist aligned to the palm in closed form, then IK of wrist and fingers."""
+class SideIndices(NamedTuple):
+    """One side's indices as arrays (traced: both sides share one compiled fit)."""
+
+    wrist: Int[Array, ""]
+    fingers: Int[Array, "15"]
+    free: Float[Array, "55"]
+
+
+def side_indices(side, dtype) -> SideIndices:
+    """`SideIndices` of ``side``: ``"left"``, ``"right"``, or a boolean array, true for the left hand."""
+    left = jnp.asarray(side == "left") if isinstance(side, str) else side
+    return SideIndices(jnp.where(left, WRIST["left"], WRIST["right"]),
+                 jnp.where(left, jnp.arange(25, 40), jnp.arange(40, 55)),
+                 jnp.where(left, jnp.asarray(FREE["left"], dtype), jnp.asarray(FREE["right"], dtype)))
+
+
+def palm_start(km: KeypointModel, side, world: Float[Array, "21 3"]) -> Float[Array, "55 3"]:
+    """The body at rest with the ``side`` hand's wrist turned so that its palm best matches that of ``world``
+    (Kabsch on the wrist and the four knuckles; missing points count as zeros)."""
     dtype = km.body.joint_template.dtype
     rest = jnp.zeros((55, 3), dtype)
-    betas = jnp.zeros(km.body.num_betas, dtype)
+    world = jnp.where(jnp.all(jnp.isfinite(world), -1, keepdims=True), world, 0.0)
+    model_palm = keypoints_cm(km, rest, jnp.zeros(km.body.num_betas, dtype)).T[jnp.array(PALM)]
+    turn = palm_rotation(model_palm, world[jnp.array(PALM)])
+    return rest.at[side_indices(side, dtype).wrist].set(rotmat_to_rotvec(turn))
+
+
+def hand_ik_one(km: KeypointModel, side, world, world_conf, ik_config=HAND_IK, start=None) -> Float[Array, "55 3"]:
+    """The pose (55, 3; the body at rest) whose ``side`` hand (``"left"``, ``"right"``, or a boolean array, true
+    for left) best matches ``world (21, 3)``, metric landmarks in image-aligned axes (x right, y down) with
+    confidence ``world_conf (21,)``, up to a scale and an offset: IK of wrist and fingers from ``start`` (default
+    `palm_start`); ``km`` is that side's `hand_keypoint_model`."""
+    dtype = km.body.joint_template.dtype
+    start = palm_start(km, side, world) if start is None else start
     finite = jnp.all(jnp.isfinite(world), -1)
     world = jnp.where(finite[:, None], world, 0.0)
-    model_palm = keypoints_cm(km, rest, betas).T[jnp.array(PALM)]
-    start = rest.at[WRIST[side]].set(rotmat_to_rotvec(palm_rotation(model_palm, world[jnp.array(PALM)])))
-    pose, _, _, _ = ik_one(km, world, jnp.where(finite, world_conf, 0.0), start, betas, jnp.asarray(FREE[side], dtype),
-                           jnp.zeros((), dtype), ik_config)
+    pose, _, _, _ = ik_one(km, world, jnp.where(finite, world_conf, 0.0), start, jnp.zeros(km.body.num_betas, dtype),
+                           side_indices(side, dtype).free, jnp.zeros((), dtype), ik_config)
     return pose
 
 
-def hand_fit_from(km: KeypointModel, side: str, keypoints, pose, fit_config=HAND_FIT) -> HandFit:
-    """The fit of the ``side`` hand of ``pose (55, 3)`` (the body at rest) to ``keypoints (21, 3)``: pixels x, y
-    and a confidence (0 or non-finite: missing), through a weak-perspective camera fitted to the start."""
+def hand_fit_from(km: KeypointModel, side, keypoints, pose, fit_config=HAND_FIT) -> HandFit:
+    """The fit of the ``side`` hand (as in `hand_ik_one`) of ``pose (55, 3)`` (the body at rest) to ``keypoints
+    (21, 3)``: pixels x, y and a confidence (0 or non-finite: missing), through a weak-perspective camera fitted
+    to the start."""
     dtype = km.body.joint_template.dtype
+    ids = side_indices(side, dtype)
     betas = jnp.zeros(km.body.num_betas, dtype)
     lens = (jnp.zeros((), dtype), jnp.zeros(2, dtype))
-    fitted = fit_one(km, keypoints, pose, betas, None, lens, fit_config, free=jnp.asarray(FREE[side], dtype),
+    fitted = fit_one(km, keypoints, pose, betas, None, lens, fit_config, free=ids.free,
                      fit_betas=jnp.zeros((), dtype))
     out = fitted.params.full_pose()
-    rest_wrist = km.body.joint_template[WRIST[side], :2]
-    return HandFit(out[WRIST[side]], out[FINGERS[side]], fitted.camera_scale,
+    rest_wrist = km.body.joint_template[ids.wrist, :2]
+    return HandFit(out[ids.wrist], out[ids.fingers], fitted.camera_scale,
                    fitted.camera_trans + fitted.camera_scale * rest_wrist, fitted.status == OK,
                    fitted.reprojection_error_px)
 
 
-def hand_fit_one(km: KeypointModel, side: str, world, world_conf, keypoints, ik_config=HAND_IK,
+def hand_fit_one(km: KeypointModel, side, world, world_conf, keypoints, ik_config=HAND_IK,
                  fit_config=HAND_FIT) -> HandFit:
     """One frame of one ``side``: `hand_ik_one` to the world landmarks, then `hand_fit_from` to the 2D keypoints."""
     return hand_fit_from(km, side, keypoints, hand_ik_one(km, side, world, world_conf, ik_config), fit_config)
 
 
-def start_pose(side: str, global_orient, hand_pose):
-    """The body at rest with the ``side`` hand's wrist rotated by ``global_orient (3,)`` and its fingers at
-    ``hand_pose (15, 3)`` (a start for `hand_fit_from`, e.g. a regressor's)."""
-    rest = jnp.zeros((55, 3), jnp.asarray(hand_pose).dtype)
-    return rest.at[WRIST[side]].set(global_orient).at[FINGERS[side]].set(hand_pose)
+def start_pose(side, global_orient, hand_pose):
+    """The body at rest with the ``side`` hand's (as in `hand_ik_one`) wrist rotated by ``global_orient (3,)``
+    and its fingers at ``hand_pose (15, 3)`` (a start for `hand_fit_from`, e.g. a regressor's)."""
+    hand_pose = jnp.asarray(hand_pose)
+    ids = side_indices(side, hand_pose.dtype)
+    return jnp.zeros((55, 3), hand_pose.dtype).at[ids.wrist].set(global_orient).at[ids.fingers].set(hand_pose)
 
 
-@functools.partial(jax.jit, static_argnames=("side", "fit_config"))
-def _fit_batch(km, side, world, world_conf, keypoints, start, fit_config):
+@functools.partial(jax.jit, static_argnames=("fit_config",))
+def _fit_batch(km, left, world, world_conf, keypoints, start, fit_config):
     def one(w, c, k, p):
-        pose = hand_ik_one(km, side, w, c) if start is None else start_pose(side, *p)
-        return hand_fit_from(km, side, k, pose, fit_config)
+        pose = hand_ik_one(km, left, w, c) if start is None else start_pose(left, *p)
+        return hand_fit_from(km, left, k, pose, fit_config)
     return jax.vmap(one)(world, world_conf, keypoints, start)
 
 
@@ -146,6 +174,6 @@ def fit_hands(model: BodyModel, side: str, world, world_conf, keypoints, *, star
     def chunk(frames, n):
         w, c, k, p = frames
         k = np.concatenate([k[:n], np.zeros_like(k[n:])])  # padding frames have no keypoints
-        return jax.block_until_ready(_fit_batch(km, side, w, c, k, p, fit_config))
+        return jax.block_until_ready(_fit_batch(km, jnp.asarray(side == "left"), w, c, k, p, fit_config))
 
     return jax.tree.map(np.asarray, map_in_buckets(chunk, (*arrays, start), BUCKETS))

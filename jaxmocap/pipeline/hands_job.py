@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -91,12 +92,8 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
-                images = [frame for _, frame in batch]
-                with chrono("detect"):
-                    table = detected(tracker, images)
-                with chrono("fit"):
-                    table |= fitted(model, keypoint_models, table, images, regression, config.iterations)
-                chunk = HandChunk(ids, table, tracker.state())
+                chunk = solve_hand_chunk(tracker, model, keypoint_models, regression, config.iterations, ids,
+                                         [frame for _, frame in batch], chrono)
                 store.save(index, chunk)
                 with chrono("keypoints"):
                     write_hand_keypoints(out_dir / "keypoints", media, chunk, sum(len(c.frame_index) for c in chunks),
@@ -133,6 +130,16 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     valid = int((hands["left_valid"] | hands["right_valid"]).sum())
     return RunReport(written[0], frames_total, valid, dict(chrono.seconds), written,
                      sorted(int(i) for i in np.unique(table["hand_id"])))
+
+
+def solve_hand_chunk(tracker: HandTracker, model, keypoint_models, regression, iterations: int, ids: np.ndarray,
+                     frames: list[np.ndarray], chrono: Chrono) -> HandChunk:
+    """One chunk of frames through the hand tracker and each hand's fit."""
+    with chrono("detect"):
+        table = detected(tracker, frames)
+    with chrono("fit"):
+        table |= fitted(model, keypoint_models, table, frames, regression, iterations)
+    return HandChunk(ids, table, tracker.state())
 
 
 def detected(tracker: HandTracker, frames: list[np.ndarray]) -> dict[str, np.ndarray]:
@@ -206,15 +213,17 @@ def side_arrays(table: dict[str, np.ndarray], frames: int, hand_models: dict, sm
     return out
 
 
+@jax.jit
+def _smooth_side(global_orient, hand_pose, camera_scale, camera_trans, valid):
+    return {"global_orient": smooth_rotvecs(global_orient, valid), "hand_pose": smooth_rotvecs(hand_pose, valid),
+            "camera_scale": smooth_linear(camera_scale, valid), "camera_trans": smooth_linear(camera_trans, valid)}
+
+
 def smoothed_side(arrays: dict[str, np.ndarray], hand: smplx_jax.HandModel) -> dict[str, np.ndarray]:
     """One side's rotations (as quaternions) and camera filtered over time across valid frames; a frame whose
     smoothed hand reprojects more than `SMOOTHING_SLACK` farther than its own fit keeps its fit."""
-    valid = jnp.asarray(arrays["valid"])
-    smooth = dict(arrays, global_orient=smooth_rotvecs(arrays["global_orient"], valid),
-                  hand_pose=smooth_rotvecs(arrays["hand_pose"], valid),
-                  camera_scale=smooth_linear(arrays["camera_scale"], valid),
-                  camera_trans=smooth_linear(arrays["camera_trans"], valid))
-    smooth = {k: np.asarray(v) for k, v in smooth.items()}
+    smooth = arrays | {k: np.asarray(v) for k, v in _smooth_side(
+        *(arrays[k] for k in ("global_orient", "hand_pose", "camera_scale", "camera_trans", "valid"))).items()}
     errors = reprojection_errors(hand, smooth)
     ratio, pixels = SMOOTHING_SLACK
     keep = arrays["valid"] & (errors > np.maximum(ratio * arrays["reprojection_error_px"],

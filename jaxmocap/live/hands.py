@@ -1,0 +1,158 @@
+"""``jaxmocap live --mode hands``: hands alone, frame by frame. Each tracked hand is solved causally (`hand_step`:
+IK to its world landmarks warm-started from its previous frame, a few iterations of the fit to its 2D keypoints,
+the One-Euro filter), sent as a JSON line (`hands_message`) and recorded as ``hands.npz`` (`HandRecorder`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+import smplx_jax
+from jaxmocap.detect.hand_tracker import SIDES, Hand
+from jaxmocap.hand_motion import write_hands
+from jaxmocap.integrate.hand_fit import HAND_FIT, HandFit, hand_fit_from, hand_ik_one, hand_keypoint_model, palm_start
+from jaxmocap.integrate.inverse_kinematics import IKConfig
+from jaxmocap.integrate.keypoints import KeypointModel
+from jaxmocap.live.one_euro import Filtered, OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
+from jaxmocap.pipeline.hands_job import COLUMNS, FIT_COLUMNS, side_arrays
+
+
+@dataclass(frozen=True)
+class HandSettings:
+    """How much each hand's frame solves, and how the One-Euro filter smooths its rotations (quaternion units per
+    second) and camera (pixels); a hand unseen for more than ``reset_after`` seconds starts afresh, with
+    ``warm_up`` steps on its first frame."""
+
+    ik_iterations: int = 5
+    ik_cg_iterations: int = 15
+    fit_iterations: int = 5
+    rotations: OneEuro = OneEuro(min_cutoff=1.0, beta=10.0)
+    camera: OneEuro = OneEuro(min_cutoff=1.0, beta=0.5)
+    reset_after: float = 0.5
+    warm_up: int = 2
+
+
+class HandState(NamedTuple):
+    """What a hand carries to its next frame: the last IK pose (the next start) and the filters."""
+
+    pose: Float[Array, "55 3"]
+    rotations: Filtered  # (16, 4): wrist and fingers as quaternions
+    camera: Filtered  # (1, 3): scale, tx, ty
+
+
+def _hand_rotations(fit: HandFit) -> Float[Array, "16 3"]:
+    return jnp.concatenate([fit.global_orient[None], fit.hand_pose])
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def hand_step(km: KeypointModel, left: Bool[Array, ""], world: Float[Array, "21 3"], keypoints: Float[Array, "21 3"],
+              state: HandState, fresh: Bool[Array, ""], dt: Float[Array, ""], settings: HandSettings
+              ) -> tuple[HandFit, HandState]:
+    """One hand's frame (``left``: its side; ``km`` that side's `hand_keypoint_model`): IK from the closed-form
+    start when ``fresh``, else from ``state``'s pose, then the fit and the filters (which start here when
+    ``fresh``); ``dt``: seconds since the hand's last frame."""
+    ik_config = IKConfig(iterations=settings.ik_iterations, cg_iterations=settings.ik_cg_iterations)
+    start = jnp.where(fresh, palm_start(km, left, world), state.pose)
+    pose = hand_ik_one(km, left, world, jnp.ones(21, world.dtype), ik_config, start)
+    fitted = hand_fit_from(km, left, keypoints, pose, dataclasses.replace(HAND_FIT,
+                                                                          iterations=settings.fit_iterations))
+    camera = jnp.concatenate([fitted.camera_scale[None], fitted.camera_trans])[None]
+    rotations = _hand_rotations(fitted)
+    begin = jax.tree.map(lambda a, b: jnp.where(fresh, a, b),
+                         HandState(pose, quaternion_state(rotations), start_state(camera)), state)
+    rotations, rotation_state = one_euro_rotvecs(rotations, begin.rotations, dt, settings.rotations)
+    camera, camera_state = one_euro(camera, begin.camera, dt, settings.camera)
+    new = jax.tree.map(lambda a, b: jnp.where(fitted.valid, a, b), HandState(pose, rotation_state, camera_state),
+                       state)
+    return HandFit(rotations[0], rotations[1:], camera[0, 0], camera[0, 1:], fitted.valid,
+                   fitted.reprojection_error_px), new
+
+
+def fresh_hand_state() -> HandState:
+    """The state of a hand not seen before (filters reset on use)."""
+    zeros = jnp.zeros((16, 3), jnp.float32)
+    return HandState(jnp.zeros((55, 3), jnp.float32), quaternion_state(zeros), start_state(jnp.zeros((1, 3))))
+
+
+class HandSolver:
+    """Each hand's `hand_step`, frame after frame, with its state kept by ``hand_id``."""
+
+    def __init__(self, model: smplx_jax.BodyModel, settings: HandSettings = HandSettings()):
+        self.models = {side: hand_keypoint_model(model, side) for side in SIDES}
+        self.settings = settings
+        self.hands: dict[int, tuple[HandState, float]] = {}
+
+    def warm_up(self) -> None:
+        """Compile `hand_step` (on no hand: zeros) before the first frame."""
+        self._step("left", jnp.zeros((21, 3)), jnp.zeros((21, 3)), fresh_hand_state(), True, 1.0)
+
+    def _step(self, side, world, keypoints, state, fresh, dt):
+        return jax.block_until_ready(hand_step(self.models[side], jnp.asarray(side == "left"),
+                                               jnp.asarray(world, jnp.float32), jnp.asarray(keypoints, jnp.float32),
+                                               state, jnp.asarray(fresh), jnp.float32(dt), self.settings))
+
+    def __call__(self, hands: list[Hand], now: float) -> dict[int, HandFit]:
+        """Each hand of one frame at ``now`` seconds (the frame's time), by ``hand_id``."""
+        solved = {}
+        for hand in hands:
+            keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
+            state, last = self.hands.get(hand.hand_id, (None, -np.inf))
+            fresh = state is None or now - last > self.settings.reset_after
+            state = fresh_hand_state() if fresh else state
+            dt = max(now - last, 1e-3) if not fresh else 1.0
+            for _ in range(self.settings.warm_up if fresh else 1):
+                out, state = self._step(hand.side, hand.world, keypoints, state, fresh, dt)
+            solved[hand.hand_id] = jax.tree.map(np.asarray, out)
+            self.hands[hand.hand_id] = (state, now)
+        return solved
+
+
+def hand_entry(hand: Hand, fit: HandFit) -> dict:
+    """One hand's entry of a frame message: identity, side, the hands.npz keys of the hand, and its keypoints."""
+    keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
+    return {"id": int(hand.hand_id), "side": hand.side,
+            "global_orient": np.round(np.asarray(fit.global_orient, np.float64), 5).tolist(),
+            "hand_pose": np.round(np.asarray(fit.hand_pose, np.float64), 5).tolist(),
+            "camera_scale": round(float(fit.camera_scale), 4),
+            "camera_trans": np.round(np.asarray(fit.camera_trans, np.float64), 3).tolist(),
+            "keypoints_2d": np.round(keypoints, 2).tolist()}
+
+
+class HandRecorder:
+    """Collects each solved frame's hands (`add`) and writes ``hands.npz`` (`write`), with ``frame_index`` and
+    ``time_s`` of each row."""
+
+    def __init__(self, model: smplx_jax.BodyModel, model_sha256: str, fps: float, image_size: tuple[int, int]):
+        self.hand_models = {side: smplx_jax.hand_model(model, side) for side in SIDES}
+        self.meta = {"fps": np.asarray(fps), "image_size": np.asarray(image_size),
+                     "model_sha256": np.asarray(model_sha256)}
+        self.frames: list[tuple[int, float]] = []
+        self.rows: list[dict] = []
+
+    def add(self, frame: int, seconds: float, hands: list[Hand], solved: dict[int, HandFit]) -> None:
+        for hand in hands:
+            fit = solved[hand.hand_id]
+            keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
+            self.rows.append({"frame": len(self.frames), "hand_id": hand.hand_id, "side": SIDES.index(hand.side),
+                              "keypoints_2d": keypoints, "world": hand.world, "score": hand.score, "box": hand.box}
+                             | {k: getattr(fit, k) for k in FIT_COLUMNS})
+        self.frames.append((frame, seconds))
+
+    def write(self, folder: Path) -> list[Path]:
+        """``folder/hands.npz`` over the frames solved; nothing without a frame."""
+        if not self.frames:
+            return []
+        table = {k: np.asarray([r[k] for r in self.rows]).reshape((len(self.rows),) + shape)
+                 for k, shape in COLUMNS.items()}
+        hands = side_arrays(table, len(self.frames), self.hand_models, smooth=False)
+        extra = {"frame_index": np.asarray([f for f, _ in self.frames], np.int64),
+                 "time_s": np.asarray([t for _, t in self.frames], np.float64)}
+        return [write_hands(Path(folder) / "hands.npz", hands | self.meta | extra)]
