@@ -1,6 +1,6 @@
 """End-to-end speed of ``jaxmocap run`` on the bundled clip, with a per-stage breakdown: the embedded default
-path, the same on Pose2Sim's two-person take (both people tracked and fitted), and the FrankMocap path (regressors
-with random weights of the real architecture, copy-and-paste).
+path, the same with ``--mode body`` (no hand model), the same on Pose2Sim's two-person take (both people tracked
+and fitted), and the FrankMocap path (regressors with random weights of the real architecture, copy-and-paste).
 
     python bench/pipeline.py [--out bench/results] [--quick]      (or: jaxmocap bench --only pipeline)
 
@@ -36,7 +36,8 @@ def main():
     rows = []
     with tempfile.TemporaryDirectory() as weights:
         save(Path(weights), Regressors(HandRegressor(rngs=nnx.Rngs(0)), BodyRegressor(rngs=nnx.Rngs(1))), {})
-        for path, clip, options in (("default", CLIP, {}), ("two people", TWO_PEOPLE, {}),
+        for path, clip, options in (("default", CLIP, {}), ("body only", CLIP, dict(mode="body")),
+                                    ("two people", TWO_PEOPLE, {}),
                                     ("regressors", CLIP, dict(weights=weights, integration="copy-paste"))):
             for name in ("first run",) + (() if args.quick else ("steady",)):
                 with tempfile.TemporaryDirectory() as tmp:

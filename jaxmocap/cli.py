@@ -39,9 +39,9 @@ def _cmd_run(args):
     from jaxmocap.pipeline import RunConfig, run
 
     config = RunConfig(
-        args.input, model=args.model, weights=args.weights, integration=args.integration, hand_boxes=args.hand_boxes,
-        keypoints=args.keypoints, max_people=args.max_people, start=args.start, end=args.end, stride=args.stride,
-        chunk_size=args.chunk,
+        args.input, mode=args.mode, model=args.model, weights=args.weights, integration=args.integration,
+        hand_boxes=args.hand_boxes, keypoints=args.keypoints, max_people=args.max_people, max_hands=args.max_hands,
+        start=args.start, end=args.end, stride=args.stride, chunk_size=args.chunk,
         iterations=args.iterations, focal_length=args.focal_length, smooth=not args.no_smooth,
         overlay=not args.no_overlay, exports=tuple(f for f in args.export.split(",") if f),
         frankmocap_pkl=args.frankmocap_pkl, save_frames=args.save_frames, progress=not args.quiet)
@@ -62,7 +62,8 @@ def _cmd_live(args):
         udp = None if args.udp is None else parse_address(args.udp)
     except ValueError as err:
         raise InputError(f"--udp: {err}") from None
-    config = LiveConfig(args.source, realtime=args.realtime, loops=args.loops, max_people=args.max_people,
+    config = LiveConfig(args.source, mode=args.mode, realtime=args.realtime, loops=args.loops,
+                        max_people=args.max_people, max_hands=args.max_hands,
                         serve=args.serve, host=args.host, udp=udp, record=args.record, model=args.model,
                         focal_length=args.focal_length, max_frames=args.frames, progress=not args.quiet)
 
@@ -77,10 +78,21 @@ def _cmd_live(args):
 
 
 def _cmd_detect(args):
-    from jaxmocap.detect import detect_media
+    if args.no_hands and args.mode == "hands":
+        raise InputError("--no-hands (--mode body) cannot go with --mode hands")
+    if args.max_hands < 1:
+        raise InputError(f"--max-hands must be positive, got {args.max_hands}")
+    if args.mode == "hands":
+        from jaxmocap.detect.hand_json import detect_hands_media
 
-    written = detect_media(args.input, args.out, overlay=args.overlay, progress=not args.quiet,
-                           max_people=args.max_people, model_dir=args.models, hands=not args.no_hands)
+        written = detect_hands_media(args.input, args.out, overlay=args.overlay, progress=not args.quiet,
+                                     max_hands=args.max_hands, model_dir=args.models)
+    else:
+        from jaxmocap.detect import detect_media
+
+        written = detect_media(args.input, args.out, overlay=args.overlay, progress=not args.quiet,
+                               max_people=args.max_people, model_dir=args.models,
+                               hands=args.mode == "whole" and not args.no_hands)
     print(f"wrote {len(written)} OpenPose JSON file(s) to {args.out}")
 
 
@@ -113,6 +125,15 @@ def _cmd_convert_frankmocap(args):
         print(f"wrote {path}")
 
 
+def _mode_options(p) -> None:
+    """``--mode`` and ``--max-hands``, the same for ``run``, ``detect`` and ``live``."""
+    p.add_argument("--mode", choices=("whole", "body", "hands"), default="whole",
+                   help="whole: body and hands; body: no hand model runs (faster, hands flat); hands: hands alone, "
+                        "no body needed (default: %(default)s)")
+    p.add_argument("--max-hands", type=int, default=2, metavar="N",
+                   help="hands tracked at most in --mode hands (default: %(default)s)")
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(allow_abbrev=False, prog="jaxmocap", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
@@ -127,6 +148,7 @@ def _parser() -> argparse.ArgumentParser:
     p = command("run", help="video, image folder, image or webcam -> DIR/motion.npz, overlay, exports")
     p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, default=Path("jaxmocap_out"), help="output folder (default: %(default)s)")
+    _mode_options(p)
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
     p.add_argument("--weights", type=Path, default=None, help="FrankMocap regressors from convert-frankmocap")
     p.add_argument("--integration", choices=("optimize", "copy-paste", "eft"), default="optimize",
@@ -158,6 +180,7 @@ def _parser() -> argparse.ArgumentParser:
 
     p = command("live", help="webcam, stream or file -> SMPL-X frame by frame, on a web page and over UDP")
     p.add_argument("source", help="webcam index (0), stream URL, or video file")
+    _mode_options(p)
     p.add_argument("--realtime", action="store_true",
                    help="play a file at its own frame rate, as if live (frames dropped when behind)")
     p.add_argument("--loop", dest="loops", type=int, default=1, metavar="N",
@@ -180,10 +203,11 @@ def _parser() -> argparse.ArgumentParser:
     p = command("detect", help="2D keypoints (BODY_25 + hands) as OpenPose JSON, one file per frame")
     p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, required=True, help="output folder for the JSON files")
+    _mode_options(p)
     p.add_argument("--overlay", action="store_true", help="also draw the skeletons (images or a video)")
     p.add_argument("--max-people", type=int, default=4, help="people per frame, each with a person_id in a video "
                                                               "(default: %(default)s)")
-    p.add_argument("--no-hands", action="store_true", help="body keypoints only")
+    p.add_argument("--no-hands", action="store_true", help="body keypoints only, as --mode body")
     p.add_argument("--models", type=Path, default=None, help="folder holding the four mediapipe .tflite files")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_detect)

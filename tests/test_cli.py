@@ -1,5 +1,6 @@
 """The command line: exit codes, one-line errors, and the files it writes."""
 
+import json
 import os
 import subprocess
 import sys
@@ -84,13 +85,64 @@ def test_compiled_programs_are_kept_on_disk_for_the_next_run(tmp_path):
 
 
 def test_an_option_abbreviated_or_mistyped_is_an_error(capsys):
-    """``--mode`` is not taken for ``--model``: argparse's abbreviations are off in every command."""
+    """``--max-hand`` is not taken for ``--max-hands`` (nor was ``--mode`` for ``--model`` before ``--mode`` came):
+    argparse's abbreviations are off in every command."""
     with pytest.raises(SystemExit) as stop:
-        main(["run", "x.jpg", "--mode", "hands"])
-    assert stop.value.code == 2 and "unrecognized arguments: --mode hands" in capsys.readouterr().err
+        main(["run", "x.jpg", "--max-hand", "3"])
+    assert stop.value.code == 2 and "unrecognized arguments: --max-hand 3" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["live", "0", "--seve", "8080"])
     parsers = [Path(__file__).parents[1] / d for d in ("jaxmocap", "bench", "train")]
     calls = [line for folder in parsers for path in folder.rglob("*.py") for line in path.read_text().splitlines()
              if "ArgumentParser(" in line]
     assert calls and all("allow_abbrev=False" in line for line in calls), calls
+
+
+@pytest.mark.parametrize("args, message", [
+    (["run", "--mode", "hands", "--keypoints", "k"], "--mode hands does not take --keypoints"),
+    (["run", "--mode", "hands", "--weights", "w", "--integration", "copy-paste"],
+     "--mode hands does not take --integration copy-paste"),
+    (["run", "--mode", "hands", "--weights", "w", "--hand-boxes", "body"], "--mode hands does not take --hand-boxes"),
+    (["run", "--mode", "body", "--weights", "w", "--hand-boxes", "body"], "--mode body does not take --hand-boxes"),
+    (["run", "--max-hands", "0"], "max-hands must be positive"),
+    (["detect", "--mode", "hands", "--no-hands"], "--no-hands (--mode body) cannot go with --mode hands"),
+    (["detect", "--mode", "hands", "--max-hands", "0"], "--max-hands must be positive"),
+    (["live", "--mode", "hands", "--max-hands", "0"], "bad max_hands 0"),
+])
+def test_modes_refuse_what_they_cannot_take(tmp_path, capsys, args, message):
+    """Refused before anything is read: the input need not exist."""
+    command, *options = args
+    assert main([command, str(tmp_path / "missing.mp4"), "--out", str(tmp_path / "o"), *options]
+                if command != "live" else [command, str(tmp_path / "missing.mp4"), *options]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+
+
+def test_detect_body_mode_finds_no_hands(tmp_path, capsys):
+    """``detect --mode body`` (and ``--no-hands``, its old name): the body's keypoints as in the whole mode, the
+    hands zero (none looked for)."""
+    image = Path(__file__).parent / "data" / "messi5.jpg"
+    people = {}
+    for name, mode in (("whole", ["--mode", "whole"]), ("body", ["--mode", "body"]), ("no-hands", ["--no-hands"])):
+        assert main(["detect", str(image), "--out", str(tmp_path / name), "--quiet", *mode]) == 0
+        people[name] = json.loads((tmp_path / name / "messi5_keypoints.json").read_text())["people"]
+    assert any(people["whole"][0]["hand_right_keypoints_2d"]) or any(people["whole"][0]["hand_left_keypoints_2d"])
+    assert people["body"] == people["no-hands"] and len(people["body"]) == len(people["whole"]) >= 1
+    for body, whole in zip(people["body"], people["whole"]):
+        assert body["pose_keypoints_2d"] == whole["pose_keypoints_2d"]
+        assert not any(body["hand_left_keypoints_2d"]) and not any(body["hand_right_keypoints_2d"])
+
+
+def test_live_body_mode_builds_no_hand_model():
+    """``live --mode body``: the detector without hands and the causal step without the hands' IK."""
+    from jaxmocap.live import LiveConfig
+    from jaxmocap.live.session import _Session
+
+    clip = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+    for mode, hands in (("body", False), ("whole", True)):
+        session = _Session(LiveConfig(clip, mode=mode, progress=False))
+        try:
+            assert session.detector.with_hands is hands and session.solver.settings.hands is hands
+            assert (session.detector._hands is not None) is hands
+        finally:
+            session.close()

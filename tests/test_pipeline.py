@@ -15,7 +15,10 @@ import smplx
 import torch
 
 import frankmocap_reference as ref
+import jaxmocap.detect.detector as detector_module
 import jaxmocap.pipeline.job as pipeline_job
+import jaxmocap.pipeline.regress as regress_module
+import jaxmocap.pipeline.stages as stages_module
 import smplx_jax
 from conftest import interrupted_at_chunk
 from jaxmocap.cli import main
@@ -25,6 +28,7 @@ from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from jaxmocap.pipeline import Observations, RunConfig
 from jaxmocap.pipeline.observe import fill_hand_gaps
 from smplx_jax import constants
+from smplx_jax.rotations import rotvec_to_rotmat
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
 FRAMES, CHUNK = 8, 4  # every run here has the same shapes, so the jitted stages compile once
@@ -214,6 +218,44 @@ def test_overlay_and_exports(result):
     assert times["count"] == FRAMES and times["max"][0] == pytest.approx((FRAMES - 1) / 60.0)
 
 
+def _no_hand_model(monkeypatch):
+    """Any hand model (the detector's, the hand IK, the hand regressor) called from here on fails the test."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("a hand model ran in --mode body")
+
+    for module, name in ((detector_module, "HandEstimator"), (stages_module, "hand_into_body"),
+                         (regress_module, "predict_hands")):
+        monkeypatch.setattr(module, name, refuse)
+
+
+def _degrees_between(a, b):
+    """Angles (degrees) between the rotations of axis-angles ``a`` and ``b`` (..., 3)."""
+    relative = np.einsum("...ji,...jk->...ik", np.asarray(rotvec_to_rotmat(a)), np.asarray(rotvec_to_rotmat(b)))
+    return np.degrees(np.arccos(np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)))
+
+
+def test_body_mode_runs_no_hand_model_and_keeps_the_whole_modes_body(result, tmp_path, monkeypatch):
+    """``--mode body`` (FrankMocap's body demo): no hand detector, no hand IK; flat, unseen hands; the body of the
+    whole mode but where the hands move it: the wrists (their rotation is the hand's) and a little the arms (frames
+    20-27: global orientation within 5.3 degrees, the other body joints within 6.5, 0.3 on average)."""
+    _no_hand_model(monkeypatch)
+    out, _ = result
+    report = run(CLIP, tmp_path, mode="body", start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False,
+                 progress=False)
+    body, whole = read_motion(report.motion), read_motion(out / "motion.npz")
+    assert body["valid"].all() and np.all(body["reprojection_error_px"] < 25.0)
+    assert not body["left_hand_pose"].any() and not body["right_hand_pose"].any()
+    assert not body["keypoints_2d"][:, 25:, 2].any() and whole["keypoints_2d"][:, 25:, 2].any()
+    people = [json.loads(p.read_text())["people"] for p in sorted((tmp_path / "keypoints").iterdir())]
+    assert len(people) == FRAMES and not any(v for p in people for k in ("hand_left_keypoints_2d",
+                                                                          "hand_right_keypoints_2d") for v in p[0][k])
+    wrists = [constants.LEFT_WRIST - 1, constants.RIGHT_WRIST - 1]
+    orient = _degrees_between(body["global_orient"], whole["global_orient"])
+    joints = np.delete(_degrees_between(body["body_pose"], whole["body_pose"]), wrists, axis=1)
+    assert orient.max() < 15.0 and joints.max() < 15.0 and joints.mean() < 2.0, (orient.max(), joints.max(),
+                                                                                 joints.mean())
+
+
 def test_interrupted_run_resumes_to_the_same_motion(result, tmp_path, monkeypatch):
     out, _ = result
     with interrupted_at_chunk(monkeypatch, 1), pytest.raises(KeyboardInterrupt):
@@ -256,21 +298,28 @@ def test_bad_input_is_one_line(tmp_path, capsys, monkeypatch, args, message):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("integration, hand_boxes", [("copy-paste", "keypoints"), ("optimize", "keypoints"),
-                                                     ("copy-paste", "body")])
-def test_frankmocap_path_with_converted_weights(tmp_path, integration, hand_boxes):
+@pytest.mark.parametrize("integration, hand_boxes, mode", [
+    ("copy-paste", "keypoints", "whole"), ("optimize", "keypoints", "whole"), ("copy-paste", "body", "whole"),
+    ("copy-paste", "keypoints", "body")])
+def test_frankmocap_path_with_converted_weights(tmp_path, monkeypatch, integration, hand_boxes, mode):
     """Random FrankMocap-format checkpoints -> convert-frankmocap -> run --weights: a motion for every frame; with
-    ``--hand-boxes body`` the hand detector is skipped and the body's hands give boxes inside the image."""
+    ``--hand-boxes body`` the hand detector is skipped and the body's hands give boxes inside the image; with
+    ``--mode body`` the body regressor alone runs (FrankMocap's body demo), the hands flat."""
     ref.write_checkpoints(tmp_path)
     assert main(["convert-frankmocap", "--hand", str(tmp_path / "pose_shape_best.pth"), "--hand-mean",
                  str(tmp_path / "mean_mano_params.pkl"), "--body", str(tmp_path / "body.pt"), "--out",
                  str(tmp_path / "weights")]) == 0
+    if mode == "body":
+        _no_hand_model(monkeypatch)
     report = run(CLIP, tmp_path / "out", weights=tmp_path / "weights", integration=integration,
                               start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False,
-                              hand_boxes=hand_boxes, frankmocap_pkl=True)
+                              hand_boxes=hand_boxes, frankmocap_pkl=True, mode=mode)
     motion = read_motion(report.motion)
     assert motion["valid"].all() and np.all(np.isfinite(motion["body_pose"]))
     assert np.all(motion["camera_scale"] > 0)
+    if mode == "body":
+        assert not motion["left_hand_pose"].any() and not motion["right_hand_pose"].any()
+        assert not motion["keypoints_2d"][:, 25:, 2].any()
     if hand_boxes == "body":
         assert not motion["keypoints_2d"][:, 25:, 2].any()  # no hand detection
         files = sorted((tmp_path / "out" / "mocap").iterdir())
@@ -373,7 +422,7 @@ def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
     other.write_bytes(CLIP.read_bytes())
     variants = dict(source=other, model=None, weights=tmp_path / "weights", integration="copy-paste",
                     hand_boxes="body", keypoints=tmp_path / "keypoints", start=1, end=9, stride=2, chunk_size=64,
-                    iterations=5, focal_length=1000.0, max_people=2)
+                    iterations=5, focal_length=1000.0, max_people=2, mode="body", max_hands=3)
     keyed = {f.name for f in dataclasses.fields(RunConfig) if f.metadata != AT_THE_END}
     assert set(variants) == keyed
     for name, value in variants.items():
@@ -392,7 +441,12 @@ def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
     (dict(integration="eft"), "needs --weights"), (dict(integration="magic"), "unknown integration"),
     (dict(hand_boxes="body"), "needs --weights"), (dict(focal_length=-3.0), "focal-length must be positive"),
     (dict(exports=("fbx",)), "unknown export format"), (dict(chunk_size=0), "chunk-size must be positive"),
-    (dict(max_people=0), "max-people must be positive"),
+    (dict(max_people=0), "max-people must be positive"), (dict(max_hands=0), "max-hands must be positive"),
+    (dict(mode="feet"), "unknown mode 'feet'"),
+    (dict(mode="hands", keypoints=Path("k")), "hands does not take --keypoints"),
+    (dict(mode="hands", weights=Path("w"), integration="eft"), "hands does not take --integration eft"),
+    (dict(mode="hands", weights=Path("w"), hand_boxes="body"), "hands does not take --hand-boxes body"),
+    (dict(mode="body", weights=Path("w"), hand_boxes="body"), "body does not take --hand-boxes body"),
 ])
 def test_run_config_refuses_what_cannot_run(options, message):
     with pytest.raises(InputError, match=message):

@@ -83,7 +83,8 @@ class Detector:
     a track is lost (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked; for a video,
     `search_interval` of its frame rate, so that someone who comes in is found within a quarter second), and each
     hand comes, as in mediapipe's holistic, from the ROI that the body's wrist, pinky and index give, refined by
-    the recrop model, or from the previous frame's hand while that stays close to it.
+    the recrop model, or from the previous frame's hand while that stays close to it. ``hands=False``: bodies
+    alone, the hand models not even loaded.
     Model files: see ``jaxmocap.detect.models`` (``model_dir`` or ``$JAXMOCAP_MEDIAPIPE_DIR`` to use a copy).
     """
 
@@ -101,7 +102,7 @@ class Detector:
         self.redetect_every = redetect_every
         self._pose = PoseEstimator(paths["pose_detection.tflite"], paths["pose_landmark_full.tflite"], num_threads)
         self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
-                                    paths["hand_recrop.tflite"], num_threads)
+                                    paths["hand_recrop.tflite"], num_threads) if hands else None
         self._tracks: list[_Track] = []
         self._frame = 0
 

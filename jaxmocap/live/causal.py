@@ -36,8 +36,10 @@ class LiveSettings:
     per second, about half the angular speed in radians), the translation across the image and in depth (metres;
     depth, which one view barely sees, the most), the weak-perspective camera (pixels) and the shape. Lighter
     filters lag less and jitter more (docs/BENCHMARKS.md, "Live"). A person unseen for more than ``reset_after``
-    seconds starts afresh, with ``warm_up`` steps on their first frame."""
+    seconds starts afresh, with ``warm_up`` steps on their first frame. ``hands``: the hands' IK runs (not with
+    ``--mode body``: the hands stay flat)."""
 
+    hands: bool = True
     ik_iterations: int = 5
     ik_cg_iterations: int = 15
     fit_iterations: int = 5
@@ -101,7 +103,7 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
     ik_config = IKConfig(iterations=settings.ik_iterations, cg_iterations=settings.ik_cg_iterations)
     targets, conf = blazepose_targets(world)
     theta, betas, _, _ = ik_one(models.body, targets, conf, state.theta, state.betas, _MASKS[0], 0.0, ik_config)
-    for side, km in enumerate((models.left, models.right)):
+    for side, km in enumerate((models.left, models.right) if settings.hands else ()):
         seen = jnp.full(21, jnp.where(hands_conf[side] > 0, 1.0, 0.0))
         theta, betas, _, _ = ik_one(km, hands_world[side], seen, theta, betas, _MASKS[1 + side], 0.0, ik_config)
     fit_config = dataclasses.replace(FIT_FROM_IK, iterations=settings.fit_iterations)

@@ -8,6 +8,7 @@ could not take (counted); a file played as fast as it can be (no ``realtime``) d
 """
 
 import contextlib
+import dataclasses
 import signal
 import sys
 import threading
@@ -32,6 +33,7 @@ from jaxmocap.live.source import Frame, LiveSource
 from jaxmocap.live.stream import UdpSender, frame_message, person_message
 from jaxmocap.live.viewer import Viewer
 from jaxmocap.overlay import Posed, people_over_frame
+from jaxmocap.pipeline.config import MODES
 from jaxmocap.pipeline.observe import Observations, observe_people
 from jaxmocap.pipeline.stages import lens_of
 
@@ -40,18 +42,22 @@ from jaxmocap.pipeline.stages import lens_of
 class LiveConfig:
     """``jaxmocap live SOURCE [options]`` as one value.
 
-    ``source``: a webcam index, a stream URL or a video file; ``realtime``: play a file at its frame rate, as a
-    camera would deliver it (frames dropped when the solve falls behind), else as fast as it is solved, every
-    frame; ``loops``: times a file plays (0: until stopped). ``max_people``: people tracked at most. ``serve``: the
-    web page's port (None: no page) on ``host``; ``udp``: ``(host, port)`` to send each frame's JSON line to;
-    ``record``: a folder to write the motions to at the end (as ``jaxmocap run`` does). ``max_frames``: stop after
-    that many frames solved. ``view_height``: the page's frame height in pixels.
+    ``source``: a webcam index, a stream URL or a video file; ``mode``: ``whole`` (body and hands), ``body`` (no
+    hand model runs, hands flat) or ``hands`` (hands alone, up to ``max_hands``: `jaxmocap.live.hands`);
+    ``realtime``: play a file at its frame rate, as a camera would deliver it (frames dropped when the solve falls
+    behind), else as fast as it is solved, every frame; ``loops``: times a file plays (0: until stopped).
+    ``max_people``: people tracked at most. ``serve``: the web page's port (None: no page) on ``host``; ``udp``:
+    ``(host, port)`` to send each frame's JSON line to; ``record``: a folder to write the motions to at the end (as
+    ``jaxmocap run`` does). ``max_frames``: stop after that many frames solved. ``view_height``: the page's frame
+    height in pixels.
     """
 
     source: str | Path
+    mode: str = "whole"
     realtime: bool = False
     loops: int = 1
     max_people: int = 1
+    max_hands: int = 2
     serve: int | None = None
     host: str = "127.0.0.1"
     udp: tuple[str, int] | None = None
@@ -64,7 +70,8 @@ class LiveConfig:
     settings: LiveSettings = field(default_factory=LiveSettings)
 
     def __post_init__(self):
-        checks = (("loops", self.loops >= 0), ("max_people", self.max_people >= 1),
+        checks = (("mode", self.mode in MODES), ("loops", self.loops >= 0), ("max_people", self.max_people >= 1),
+                  ("max_hands", self.max_hands >= 1),
                   ("serve", self.serve is None or 0 <= self.serve < 65536),
                   ("max_frames", self.max_frames is None or self.max_frames >= 1),
                   ("view_height", self.view_height >= 64),
@@ -112,8 +119,9 @@ class _Session:
         self.sender = None if config.udp is None else UdpSender(config.udp)
         self.source = LiveSource(config.source, config.realtime, config.loops)
         self.lens = lens_of(self.source.size, config.focal_length)
-        self.solver = CausalSolver(self.model, self.lens, config.settings)
-        self.detector = Detector(static_image_mode=False, max_people=config.max_people,
+        hands = config.mode == "whole"
+        self.solver = CausalSolver(self.model, self.lens, dataclasses.replace(config.settings, hands=hands))
+        self.detector = Detector(static_image_mode=False, max_people=config.max_people, hands=hands,
                                  redetect_every=search_interval(self.source.fps))
         self.tracker = IdentityTracker()
         self.detected, self.shown = Mailbox(), Mailbox()
@@ -261,7 +269,12 @@ def _sheltered():
 
 def live(config: LiveConfig, started=None) -> LiveReport:
     """Run a live session until the source ends, ``max_frames`` are solved or Ctrl-C; ``started(port)`` is called
-    when capture starts, after compiling (``port``: the web page's, or None)."""
+    when capture starts, after compiling (``port``: the web page's, or None). ``mode`` ``hands`` is
+    `jaxmocap.live.hands.live_hands`'s."""
+    if config.mode == "hands":
+        from jaxmocap.live.hands import live_hands
+
+        return live_hands(config, started)
     session = _Session(config)
     try:
         session.warm_up()

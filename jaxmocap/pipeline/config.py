@@ -7,6 +7,7 @@ from pathlib import Path
 
 from jaxmocap.errors import InputError
 
+MODES = ("whole", "body", "hands")
 INTEGRATIONS = ("optimize", "copy-paste", "eft")
 HAND_BOXES = ("keypoints", "body")
 EXPORT_FILES = {"bvh": "motion.bvh", "gltf": "motion.glb"}
@@ -17,14 +18,16 @@ AT_THE_END = {"chunks": False}  # field metadata: an option used only after the 
 class RunConfig:
     """``jaxmocap run SOURCE [options]`` as one value: ``run(RunConfig(source, ...), out_dir)``.
 
-    ``source``: a video file, image folder, single image or webcam index. ``model``: an SMPL-X model file (default:
-    the built-in one). ``weights``: FrankMocap's converted regressors (from ``convert-frankmocap``); without them the
-    embedded default path (detector landmarks -> IK -> fit). ``integration``: ``optimize`` (the fit), or with
-    ``weights`` ``copy-paste`` or ``eft`` (the body regressor fine-tuned per frame). ``hand_boxes``: hand crops from
-    the detector's ``keypoints``, or (with ``weights``) from the ``body`` regressor's projected hands (FrankMocap's
-    fast mode). ``keypoints``: a folder of OpenPose JSON of one person to fit to instead of the detector's 2D
-    keypoints (then one person is tracked). ``max_people``: people tracked at most (each gets an identity and a
-    motion; the main one, seen in most frames, is ``motion.npz``).
+    ``source``: a video file, image folder, single image or webcam index. ``mode``: ``whole`` (body and hands),
+    ``body`` (no hand model runs, hands flat: FrankMocap's body demo) or ``hands`` (hands alone, no body needed:
+    ``hands.npz``). ``model``: an SMPL-X model file (default: the built-in one). ``weights``: FrankMocap's converted
+    regressors (from ``convert-frankmocap``); without them the embedded default path (detector landmarks -> IK ->
+    fit). ``integration``: ``optimize`` (the fit), or with ``weights`` ``copy-paste`` or ``eft`` (the body regressor
+    fine-tuned per frame). ``hand_boxes``: hand crops from the detector's ``keypoints``, or (with ``weights``) from
+    the ``body`` regressor's projected hands (FrankMocap's fast mode). ``keypoints``: a folder of OpenPose JSON of
+    one person to fit to instead of the detector's 2D keypoints (then one person is tracked). ``max_people``: people
+    tracked at most (each gets an identity and a motion; the main one, seen in most frames, is ``motion.npz``).
+    ``max_hands``: hands tracked at most in ``hands`` mode.
     ``start``/``end``/``stride``: the frames used. ``chunk_size``: frames per resumable chunk. ``iterations``: fit
     iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``smooth``: temporal
     smoothing; ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``, ``save_frames`` (a video's frames as
@@ -34,12 +37,14 @@ class RunConfig:
     """
 
     source: str | Path
+    mode: str = "whole"
     model: Path | None = None
     weights: Path | None = None
     integration: str = "optimize"
     hand_boxes: str = "keypoints"
     keypoints: Path | None = None
     max_people: int = 4
+    max_hands: int = 2
     start: int = 0
     end: int | None = None
     stride: int = 1
@@ -54,18 +59,28 @@ class RunConfig:
     progress: bool = field(default=True, metadata=AT_THE_END)
 
     def __post_init__(self):
+        if self.mode not in MODES:
+            raise InputError(f"unknown mode {self.mode!r} ({', '.join(MODES)})")
         if self.integration not in INTEGRATIONS:
             raise InputError(f"unknown integration {self.integration!r} ({', '.join(INTEGRATIONS)})")
+        if self.hand_boxes not in HAND_BOXES:
+            raise InputError(f"unknown hand boxes {self.hand_boxes!r} ({' or '.join(HAND_BOXES)})")
+        if self.mode == "hands":
+            for refused, option in ((self.keypoints is not None, "--keypoints"),
+                                    (self.integration != "optimize", f"--integration {self.integration}"),
+                                    (self.hand_boxes == "body", "--hand-boxes body")):
+                if refused:
+                    raise InputError(f"--mode hands does not take {option} (it has no body)")
+        if self.mode == "body" and self.hand_boxes == "body":
+            raise InputError("--mode body does not take --hand-boxes body (it has no hands)")
         if self.integration != "optimize" and self.weights is None:
             raise InputError(f"--integration {self.integration} needs --weights (the regressors); the default path "
                              f"optimizes")
-        if self.hand_boxes not in HAND_BOXES:
-            raise InputError(f"unknown hand boxes {self.hand_boxes!r} ({' or '.join(HAND_BOXES)})")
         if self.hand_boxes == "body" and self.weights is None:
             raise InputError("--hand-boxes body needs --weights (the body regressor gives the hand boxes)")
         if self.focal_length is not None and not self.focal_length > 0:
             raise InputError(f"--focal-length must be positive, got {self.focal_length}")
-        for name in ("chunk_size", "iterations", "stride", "max_people"):
+        for name in ("chunk_size", "iterations", "stride", "max_people", "max_hands"):
             if getattr(self, name) < (0 if name == "iterations" else 1):
                 raise InputError(f"{name.replace('_', '-')} must be positive, got {getattr(self, name)}")
         unknown = sorted(set(self.exports) - set(EXPORT_FILES))

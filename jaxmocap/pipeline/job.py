@@ -3,10 +3,11 @@
 `run` reads as its stages (`jaxmocap.pipeline.stages`). The embedded default path (no licensed file): the
 detector's 2D keypoints and 3D landmarks -> IK of body and hands from the landmarks -> the fit to the 2D keypoints
 through a pinhole camera. With FrankMocap's converted weights: body and hand regressors on the detector's boxes ->
-copy-and-paste -> optionally the same fit. Frames go in chunks; each finished chunk is stored, so an interrupted
-run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (each chunk stores what
-the detector and the identities carry on to the next). Then over the whole sequence, for each person: temporal
-smoothing -> ``motion.npz`` -> the outputs.
+copy-and-paste -> optionally the same fit. ``--mode body`` runs no hand model (the detector without hands, no
+hand IK, no hand regressor): the hands stay flat. Frames go in chunks; each finished chunk is stored, so an
+interrupted run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (each chunk
+stores what the detector and the identities carry on to the next). Then over the whole sequence, for each person:
+temporal smoothing -> ``motion.npz`` -> the outputs. ``--mode hands`` is `hands_job`'s.
 """
 
 import dataclasses
@@ -65,8 +66,8 @@ class Inputs:
     def open(cls, config: RunConfig) -> "Inputs":
         model_path = Path(config.model) if config.model else smplx_jax.default_model_path()
         model = smplx_jax.load_model(model_path)
-        regression = None if config.weights is None else Regression.load(config.weights, model,
-                                                                           config.hand_boxes == "body")
+        regression = None if config.weights is None else Regression.load(
+            config.weights, model, config.hand_boxes if config.mode == "whole" else None)
         given = None if config.keypoints is None else keypoints_by_frame(config.keypoints)
         media, frames = open_media(config.source, config.start, config.end, config.stride)
         lens = lens_of(media.size, config.focal_length) if regression is None else (None, None)
@@ -76,7 +77,11 @@ class Inputs:
 def run(config: RunConfig, out_dir) -> RunReport:
     """Run ``config`` and write ``out_dir/motion.npz`` (the main person; docs/formats.md), each person's
     ``out_dir/people/<id>/motion.npz``, the detections as OpenPose JSON in ``out_dir/keypoints/``, and the outputs
-    ``config`` asks for (`write_outputs`)."""
+    ``config`` asks for (`write_outputs`). ``--mode hands`` is `hands_job.run_hands`'s (``out_dir/hands.npz``)."""
+    if config.mode == "hands":
+        from jaxmocap.pipeline.hands_job import run_hands
+
+        return run_hands(config, out_dir)
     out_dir = Path(out_dir)
     (out_dir / "keypoints").mkdir(parents=True, exist_ok=True)
     inputs = Inputs.open(config)
@@ -124,7 +129,7 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
     from tqdm import tqdm
 
     still = inputs.media.kind in ("image", "images")
-    detector = Detector(static_image_mode=still, hands=config.hand_boxes == "keypoints",
+    detector = Detector(static_image_mode=still, hands=config.mode == "whole" and config.hand_boxes == "keypoints",
                         max_people=1 if config.keypoints else config.max_people,
                         redetect_every=search_interval(inputs.media.fps))
     tracker = None if still else IdentityTracker()

@@ -22,16 +22,17 @@ _PASTE = jax.jit(jax.vmap(copy_paste, in_axes=(None, 0, 0, 0, 0, 0)))
 
 @dataclass(frozen=True)
 class Regression:
-    """Loaded networks and what decoding them needs (built once per run). ``hands_from_body``: hand boxes from
-    the body regressor's projected hands (`hand_boxes_from_body`) instead of the detector's."""
+    """Loaded networks and what decoding them needs (built once per run). ``hand_boxes``: where the hand
+    regressor's crops come from, the detector's hand ``keypoints`` or the ``body`` regressor's projected hands
+    (`hand_boxes_from_body`); None: the hand regressor does not run, hands stay flat (``--mode body``)."""
 
     predictor: Predictor
     right_hand: smplx_jax.HandModel
-    hands_from_body: bool = False
+    hand_boxes: str | None = "keypoints"
 
     @classmethod
-    def load(cls, weights_dir, model: smplx_jax.BodyModel, hands_from_body: bool = False) -> "Regression":
-        return cls(Predictor(load(weights_dir)), smplx_jax.hand_model(model, "right"), hands_from_body)
+    def load(cls, weights_dir, model: smplx_jax.BodyModel, hand_boxes: str | None = "keypoints") -> "Regression":
+        return cls(Predictor(load(weights_dir)), smplx_jax.hand_model(model, "right"), hand_boxes)
 
 
 def _xywh(boxes):
@@ -47,8 +48,8 @@ def _pixel_camera(camera, window):
 
 
 def _regress(model, reg: Regression, frames, obs: Observations, rows, eft: bool):
-    """Copy-and-paste bodies of the frames ``rows``, their pixel cameras, ``ok`` where the body was cropped, and
-    the hand boxes used (N, 2, 4)."""
+    """Copy-and-paste bodies of the frames ``rows`` (without a hand regressor, the bodies with flat hands), their
+    pixel cameras, ``ok`` where the body was cropped, and the hand boxes used (N, 2, 4; NaN without one)."""
     images = np.stack([frames[i] for i in rows])
     local = np.arange(len(rows))
     body_boxes = _xywh(obs.body_box[rows])
@@ -56,7 +57,13 @@ def _regress(model, reg: Regression, frames, obs: Observations, rows, eft: bool)
         fine_tuned_bodies(reg.predictor, model, images, local, body_boxes, obs.keypoints[rows]) if eft
         else predict_bodies(reg.predictor, images, local, body_boxes))
     body = decode_bodies(model, body_raw, body_window)
-    hand_boxes = (hand_boxes_from_body(np.asarray(body.joints_2d), images.shape[2:0:-1]) if reg.hands_from_body
+    safe = jax.tree.map(lambda a: jnp.where(jnp.isfinite(a), a, 0.0), body.params)
+    scale, trans = _pixel_camera(jnp.where(jnp.isfinite(body_raw.camera), body_raw.camera, 1.0), body_window)
+    if reg.hand_boxes is None:
+        flat = jnp.zeros_like(safe.left_hand_pose)
+        return (safe.replace(left_hand_pose=flat, right_hand_pose=flat), np.asarray(scale), np.asarray(trans),
+                body_ok, np.full((len(rows), 2, 4), np.nan))
+    hand_boxes = (hand_boxes_from_body(np.asarray(body.joints_2d), images.shape[2:0:-1]) if reg.hand_boxes == "body"
                   else obs.hand_boxes[rows])
     boxes = _xywh(hand_boxes.reshape(-1, 4))
     is_left = np.tile([True, False], len(rows))
@@ -68,9 +75,7 @@ def _regress(model, reg: Regression, frames, obs: Observations, rows, eft: bool)
     wrists = jnp.where(hand_ok[..., None], hands.wrist_glob_rotvec.reshape(-1, 2, 3), own)
     fingers = jnp.where(hand_ok[..., None, None], hands.hand_pose.reshape(-1, 2, 15, 3),
                         jnp.stack([body.params.left_hand_pose, body.params.right_hand_pose], axis=1))
-    safe = jax.tree.map(lambda a: jnp.where(jnp.isfinite(a), a, 0.0), body.params)
     pasted = _PASTE(model, safe, fingers[:, 0], wrists[:, 0], fingers[:, 1], wrists[:, 1])
-    scale, trans = _pixel_camera(jnp.where(jnp.isfinite(body_raw.camera), body_raw.camera, 1.0), body_window)
     return pasted, np.asarray(scale), np.asarray(trans), body_ok, hand_boxes
 
 

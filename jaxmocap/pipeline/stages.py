@@ -40,9 +40,12 @@ def observations(detector: Detector, tracker: IdentityTracker | None, frames: li
 
 def initial_bodies(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SMPLXParams:
     """The fit's start for each frame: IK of the body to BlazePose's world landmarks, then of each hand to its
-    landmarks with the body fixed (batched `SMPLXParams`)."""
+    landmarks with the body fixed (batched `SMPLXParams`; a hand seen in none of the frames, as with
+    ``--mode body``, is left as the body IK starts it: flat)."""
     theta, betas, _, _ = body_from_blazepose(model, obs.body_world)
     for side, name in enumerate(("left", "right")):
+        if not np.any(obs.hands_conf[:, side] > 0):
+            continue  # the IK would keep every frame as it is (too few targets)
         conf = np.repeat(obs.hands_conf[:, side:side + 1] > 0, 21, axis=1).astype(np.float32)
         theta, betas, _, _ = hand_into_body(model, name, obs.hands_world[:, side], theta, betas, conf=conf)
     return jax.block_until_ready(params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression))
