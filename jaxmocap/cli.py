@@ -20,11 +20,11 @@ def _cmd_model(args):
             print(f"wrote {path}")
 
 
-def _print_report(report):
+def _print_report(report, hands: bool = False):
     seconds = dict(report.seconds)
     total = sum(seconds.values())
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items())
-    print(f"{report.frames} frames ({report.valid} with a person) in {total:.1f} s "
+    print(f"{report.frames} frames ({report.valid} with a {'hand' if hands else 'person'}) in {total:.1f} s "
           f"({report.frames / max(total, 1e-9):.1f} frames/s): {stages}")
     folders = {}
     for path in report.written:
@@ -32,7 +32,7 @@ def _print_report(report):
     for folder, paths in folders.items():
         print(f"wrote {len(paths)} files in {folder}/" if len(paths) > 3 else "\n".join(f"wrote {p}" for p in paths))
     if len(report.people) > 1:
-        print(f"{len(report.people)} people tracked: {', '.join(map(str, report.people))}")
+        print(f"{len(report.people)} {'hands' if hands else 'people'} tracked: {', '.join(map(str, report.people))}")
 
 
 def _cmd_run(args):
@@ -45,7 +45,7 @@ def _cmd_run(args):
         iterations=args.iterations, focal_length=args.focal_length, smooth=not args.no_smooth,
         overlay=not args.no_overlay, exports=tuple(f for f in args.export.split(",") if f),
         frankmocap_pkl=args.frankmocap_pkl, save_frames=args.save_frames, progress=not args.quiet)
-    _print_report(run(config, args.out))
+    _print_report(run(config, args.out), hands=args.mode == "hands")
 
 
 def _cmd_demo(args):

@@ -136,11 +136,11 @@ def test_detect_body_mode_finds_no_hands(tmp_path, capsys):
 def test_live_body_mode_builds_no_hand_model():
     """``live --mode body``: the detector without hands and the causal step without the hands' IK."""
     from jaxmocap.live import LiveConfig
-    from jaxmocap.live.session import _Session
+    from jaxmocap.live.session import Session
 
     clip = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
     for mode, hands in (("body", False), ("whole", True)):
-        session = _Session(LiveConfig(clip, mode=mode, progress=False))
+        session = Session(LiveConfig(clip, mode=mode, progress=False))
         try:
             assert session.detector.with_hands is hands and session.solver.settings.hands is hands
             assert (session.detector._hands is not None) is hands

@@ -1,6 +1,7 @@
-"""``jaxmocap live --mode hands``: hands alone, frame by frame. Each tracked hand is solved causally (`hand_step`:
-IK to its world landmarks warm-started from its previous frame, a few iterations of the fit to its 2D keypoints,
-the One-Euro filter), sent as a JSON line (`hands_message`) and recorded as ``hands.npz`` (`HandRecorder`)."""
+"""``jaxmocap live --mode hands``: hands alone, frame by frame (`HandSession`, the live session's threads with the
+hand tracker). Each tracked hand is solved causally (`hand_step`: IK to its world landmarks warm-started from its
+previous frame, a few iterations of the fit to its 2D keypoints, the One-Euro filter), sent as a JSON line
+(`hand_entry`) and recorded as ``hands.npz`` (`HandRecorder`)."""
 
 from __future__ import annotations
 
@@ -16,12 +17,17 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 import smplx_jax
-from jaxmocap.detect.hand_tracker import SIDES, Hand
-from jaxmocap.hand_motion import write_hands
+from jaxmocap.detect.detector import search_interval
+from jaxmocap.detect.hand_tracker import SIDES, Hand, HandTracker
+from jaxmocap.hand_motion import hand_meshes, write_hands
 from jaxmocap.integrate.hand_fit import HAND_FIT, HandFit, hand_fit_from, hand_ik_one, hand_keypoint_model, palm_start
 from jaxmocap.integrate.inverse_kinematics import IKConfig
 from jaxmocap.integrate.keypoints import KeypointModel
 from jaxmocap.live.one_euro import Filtered, OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
+from jaxmocap.live.session import Session
+from jaxmocap.live.source import Frame
+from jaxmocap.live.stream import frame_message
+from jaxmocap.overlay import Posed
 from jaxmocap.pipeline.hands_job import COLUMNS, FIT_COLUMNS, side_arrays
 
 
@@ -156,3 +162,50 @@ class HandRecorder:
         extra = {"frame_index": np.asarray([f for f, _ in self.frames], np.int64),
                  "time_s": np.asarray([t for _, t in self.frames], np.float64)}
         return [write_hands(Path(folder) / "hands.npz", hands | self.meta | extra)]
+
+
+class HandSession(Session):
+    """`Session` of ``--mode hands``: the hand tracker (up to ``max_hands``), `HandSolver`, `HandRecorder`; the
+    frame message lists ``"hands"`` (`hand_entry`); the page draws the hand meshes."""
+
+    noun = "hands"
+
+    def _setup(self, model_sha256: str) -> None:
+        config = self.config
+        self.lens = (None, None)  # each hand has its weak-perspective camera
+        self.hand_models = {side: smplx_jax.hand_model(self.model, side) for side in SIDES}
+        self.solver = HandSolver(self.model)
+        self.detector = HandTracker(static_image_mode=False, max_hands=config.max_hands,
+                                    redetect_every=search_interval(self.source.fps))
+        self.recorder = None if config.record is None else HandRecorder(self.model, model_sha256, self.source.fps,
+                                                                         self.source.size)
+
+    def warm_up(self) -> None:
+        self.solver.warm_up()
+        if self.viewer is not None:
+            zeros = np.zeros((1, 3), np.float32)
+            for side in SIDES:
+                hand_meshes(self.hand_models[side], zeros, np.zeros((1, 15, 3), np.float32))
+
+    def _observe(self, image: np.ndarray) -> list[Hand]:
+        return self.detector(image)
+
+    def _solve(self, frame: Frame, hands: list[Hand]) -> dict[int, tuple[Hand, HandFit]]:
+        now = frame.arrived if self.source.live else frame.index / self.source.fps
+        fits = self.solver(hands, now)
+        if self.sender is not None:
+            entries = [hand_entry(h, fits[h.hand_id]) for h in hands if fits[h.hand_id].valid]
+            self.sender.send(frame_message(frame.index, now, [], hands=entries))
+        if self.recorder is not None:
+            self.recorder.add(frame.index, now, hands, fits)
+        return {h.hand_id: (h, fits[h.hand_id]) for h in hands}
+
+    def _posed(self, solved: dict[int, tuple[Hand, HandFit]]) -> list[Posed]:
+        posed = []
+        for hand, fit in solved.values():
+            if fit.valid:
+                mesh = hand_meshes(self.hand_models[hand.side], fit.global_orient[None], fit.hand_pose[None])
+                posed.append(Posed(SIDES.index(hand.side), np.asarray(mesh.vertices[0]), float(fit.camera_scale),
+                                   fit.camera_trans, np.asarray(self.hand_models[hand.side].faces),
+                                   hand.side[0].upper()))
+        return posed

@@ -109,8 +109,11 @@ class LiveReport:
 _VERTICES = jax.jit(lambda model, params: smplx_jax.forward(model, params).vertices)
 
 
-class _Session:
-    """The threads and their hand-offs (`live`)."""
+class Session:
+    """The threads and their hand-offs (`live`); a subclass solves another mode (its `_setup`, `_observe`,
+    `_solve`, `_posed`)."""
+
+    noun = "people"  # what the status line counts
 
     def __init__(self, config: LiveConfig):
         self.config = config
@@ -119,22 +122,26 @@ class _Session:
         self.sender = None if config.udp is None else UdpSender(config.udp)
         self.source = LiveSource(config.source, config.realtime, config.loops)
         self.lens = lens_of(self.source.size, config.focal_length)
-        hands = config.mode == "whole"
-        self.solver = CausalSolver(self.model, self.lens, dataclasses.replace(config.settings, hands=hands))
-        self.detector = Detector(static_image_mode=False, max_people=config.max_people, hands=hands,
-                                 redetect_every=search_interval(self.source.fps))
-        self.tracker = IdentityTracker()
         self.detected, self.shown = Mailbox(), Mailbox()
         self.errors: list[BaseException] = []
-        self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "people": 0}
-        self.recorder = None if config.record is None else Recorder(
-            self.model, file_sha256(model_path), self.lens, self.source.fps, self.source.size)
+        self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, self.noun: 0}
+        self._setup(file_sha256(model_path))
         self.viewer = None
         try:
             self.viewer = None if config.serve is None else Viewer(config.host, config.serve)
         except OSError as err:
             self.close()
             raise InputError(f"--serve: cannot listen on {config.host}:{config.serve} ({err.strerror})") from None
+
+    def _setup(self, model_sha256: str) -> None:
+        """The detector, the solver and the recorder of the mode."""
+        config, hands = self.config, self.config.mode == "whole"
+        self.solver = CausalSolver(self.model, self.lens, dataclasses.replace(config.settings, hands=hands))
+        self.detector = Detector(static_image_mode=False, max_people=config.max_people, hands=hands,
+                                 redetect_every=search_interval(self.source.fps))
+        self.tracker = IdentityTracker()
+        self.recorder = None if config.record is None else Recorder(
+            self.model, model_sha256, self.lens, self.source.fps, self.source.size)
 
     def close(self) -> None:
         """Release the source, the page and the stream (all idempotent)."""
@@ -169,17 +176,23 @@ class _Session:
     def _detect(self) -> None:
         while True:
             frame = self.source.frames.get()
-            people = observe_people(self.detector, self.tracker, [frame.image])
-            self.detected.put((frame, people), wait=self.source.lossless)
+            self.detected.put((frame, self._observe(frame.image)), wait=self.source.lossless)
+
+    def _observe(self, image: np.ndarray) -> dict[int, Observations]:
+        """What the solve needs of one frame: each person's observations by identity."""
+        return observe_people(self.detector, self.tracker, [image])
+
+    def _posed(self, solved: dict[int, Solved]) -> list[Posed]:
+        """The meshes the page draws of one frame's results."""
+        return [Posed(i, np.asarray(_VERTICES(self.model, s.params)), float(s.camera_scale), s.camera_trans)
+                for i, s in solved.items() if s.valid]
 
     def _render(self) -> None:
         faces = np.asarray(self.model.faces)
         scale = min(1.0, self.config.view_height / self.source.size[1])
         while True:
             frame, solved = self.shown.get()
-            people = [Posed(i, np.asarray(_VERTICES(self.model, s.params)), float(s.camera_scale), s.camera_trans)
-                      for i, s in solved.items() if s.valid]
-            image = people_over_frame(frame.image, people, faces, scale, *self.lens)
+            image = people_over_frame(frame.image, self._posed(solved), faces, scale, *self.lens)
             stats = self.stats
             cv2.putText(image, f"{stats['fps']:.1f} frames/s  {stats['latency_ms']:.0f} ms", (10, 24),
                         cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
@@ -239,14 +252,14 @@ class _Session:
     def _dropped(self) -> int:
         return self.source.frames.dropped + self.detected.dropped
 
-    def _update_stats(self, latencies: list[float], people: int, seconds: float) -> None:
+    def _update_stats(self, latencies: list[float], count: int, seconds: float) -> None:
         recent = latencies[-60:]
         self.stats = {"fps": len(latencies) / max(seconds, 1e-9), "latency_ms": float(np.median(recent)),
-                      "dropped": self._dropped(), "people": people}
+                      "dropped": self._dropped(), self.noun: count}
         if self.config.progress:
             s = self.stats
             print(f"\rlive: {s['fps']:.1f} frames/s, latency {s['latency_ms']:.0f} ms, {s['dropped']} dropped, "
-                  f"{s['people']} people", end="", file=sys.stderr, flush=True)
+                  f"{count} {self.noun}", end="", file=sys.stderr, flush=True)
 
     def _finish(self, latencies: list[float], stopped: str, seconds: float) -> LiveReport:
         written = [] if self.recorder is None else self.recorder.write(self.config.record)
@@ -269,13 +282,14 @@ def _sheltered():
 
 def live(config: LiveConfig, started=None) -> LiveReport:
     """Run a live session until the source ends, ``max_frames`` are solved or Ctrl-C; ``started(port)`` is called
-    when capture starts, after compiling (``port``: the web page's, or None). ``mode`` ``hands`` is
-    `jaxmocap.live.hands.live_hands`'s."""
+    when capture starts, after compiling (``port``: the web page's, or None). ``mode`` ``hands`` solves hands
+    alone (`jaxmocap.live.hands.HandSession`)."""
     if config.mode == "hands":
-        from jaxmocap.live.hands import live_hands
+        from jaxmocap.live.hands import HandSession
 
-        return live_hands(config, started)
-    session = _Session(config)
+        session = HandSession(config)
+    else:
+        session = Session(config)
     try:
         session.warm_up()
     except BaseException:

@@ -22,10 +22,12 @@ def person_message(person_id: int, params: smplx_jax.SMPLXParams, camera_scale, 
                   "keypoints_2d": np.round(np.asarray(keypoints_2d, np.float64), 2).tolist()}
 
 
-def frame_message(frame: int, seconds: float, people: list[dict]) -> bytes:
-    """A frame's JSON line: the source frame number, its time (seconds since the start) and the people."""
-    return (json.dumps({"frame": int(frame), "time": round(seconds, 4), "people": people},
-                       separators=(",", ":")) + "\n").encode()
+def frame_message(frame: int, seconds: float, people: list[dict], hands: list[dict] | None = None) -> bytes:
+    """A frame's JSON line: the source frame number, its time (seconds since the start), the people, and with
+    ``--mode hands`` the hands."""
+    message = {"frame": int(frame), "time": round(seconds, 4), "people": people}
+    message |= {} if hands is None else {"hands": hands}
+    return (json.dumps(message, separators=(",", ":")) + "\n").encode()
 
 
 def params_from_message(person: dict, num_expression: int = 10) -> smplx_jax.SMPLXParams:

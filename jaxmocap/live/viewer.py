@@ -16,7 +16,7 @@ img{max-width:100vw;max-height:92vh}#s{padding:6px}</style></head>
 <script>
 async function tick(){try{const s=await (await fetch('/stats.json')).json();
 document.getElementById('s').textContent=`${s.fps.toFixed(1)} frames/s, latency ${s.latency_ms.toFixed(0)} ms, `+
-`${s.dropped} dropped, ${s.people} people`;}catch(e){}}
+`${s.dropped} dropped, `+('hands' in s?`${s.hands} hands`:`${s.people} people`);}catch(e){}}
 setInterval(tick,1000);
 </script></body></html>
 """

@@ -39,7 +39,8 @@ SETTINGS_VERSION = 5  # of the stored chunks: bump when what a chunk holds chang
 
 @dataclass(frozen=True)
 class RunReport:
-    """What a run wrote, and how long each stage took (seconds)."""
+    """What a run wrote, and how long each stage took (seconds). ``--mode hands``: ``motion`` is hands.npz,
+    ``valid`` counts frames with a hand and ``people`` the hands' identities."""
 
     motion: Path
     frames: int
