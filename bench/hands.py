@@ -6,6 +6,8 @@ official mediapipe hand solution's landmarks-only speed on the same frames; and 
 The clip is ``tests/data/pose2sim_hand_closeup.mp4`` (the bundled clip cropped around the right hand, 320x320, 100
 frames; `bench/checks/hand_closeup.py`). Our run goes twice in one process: the first includes JAX tracing and
 compilation, the second is the steady state (``--quick``: first runs only); with and without the overlay video.
+Frames/s counts the run's stages, as ``bench/pipeline.py`` and the command's summary line do; ``wall s`` adds what
+a run does once (loading the body model, opening the models and the video: about a second).
 The peer is mediapipe 0.10.21's legacy ``mp.solutions.hands.Hands`` in video mode (``max_num_hands`` 1 and 2,
 model complexity 1), landmarks only, timed per ``process`` call after 3 warm-up frames, in its own venv as in
 ``bench/detect.py``. Prints a table and writes ``<out>/hands.json``.
@@ -68,9 +70,10 @@ def ours_run(end: int, overlay: bool) -> dict:
     with tempfile.TemporaryDirectory() as out:
         start = time.perf_counter()
         report = run(RunConfig(CLIP, mode="hands", end=end, overlay=overlay, progress=False), out)
-        seconds = time.perf_counter() - start
+        wall = time.perf_counter() - start
         hands = read_hands(report.motion)
-    return {"frames_per_s": report.frames / seconds, "seconds": seconds, "valid": report.valid,
+    stages = sum(report.seconds.values())
+    return {"frames_per_s": report.frames / stages, "seconds": stages, "wall_seconds": wall, "valid": report.valid,
             "ms_per_frame": {k: 1000 * v / report.frames for k, v in report.seconds.items()},
             "median_error_px": float(_median_error(hands))}
 
@@ -126,12 +129,12 @@ def main() -> None:
 
     print(f"{len(frames)} frames of {CLIP.name} ({frames[0].shape[1]}x{frames[0].shape[0]}), one hand, "
           f"{os.cpu_count()} CPUs, {platform.processor() or platform.machine()}")
-    print(f"{'pipeline':<62}{'frames/s':>10}{'hand found':>12}   stages (ms/frame)")
+    print(f"{'pipeline':<62}{'frames/s':>10}{'wall s':>8}{'hand found':>12}   stages (ms/frame)")
     for name, row in rows.items():
-        fps = row["frames_per_s"]
+        fps, wall = row["frames_per_s"], row.get("wall_seconds")
         stages = row["ms_per_frame"] if isinstance(row.get("ms_per_frame"), dict) else {}
-        print(f"{name:<62}{fps if isinstance(fps, str) else f'{fps:.1f}':>10}{row.get('valid', ''):>12}   "
-              + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
+        print(f"{name:<62}{fps if isinstance(fps, str) else f'{fps:.1f}':>10}{f'{wall:.1f}' if wall else '':>8}"
+              f"{row.get('valid', ''):>12}   " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
     out = args.out / "hands.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"clip": CLIP.name, "frames": len(frames), "cpus": os.cpu_count(), "rows": rows},
