@@ -113,14 +113,20 @@ def test_mirrored_image_swaps_the_side_and_mirrors_the_fit():
 
 
 def test_two_hands_are_a_left_and_a_right(tmp_path):
+    """Both hands, and with ``--max-hands`` above 2 each hand's own file and JSON person."""
     image = cv2.imread(str(CLOSEUP))
     cv2.imwrite(str(tmp_path / "two.png"), np.concatenate([image, image[:, ::-1]], axis=1))
-    run(RunConfig(tmp_path / "two.png", mode="hands", overlay=False, progress=False), tmp_path / "out")
+    run(RunConfig(tmp_path / "two.png", mode="hands", max_hands=3, overlay=False, progress=False), tmp_path / "out")
     hands = read_hands(tmp_path / "out" / "hands.npz")
     assert hands["left_valid"][0] and hands["right_valid"][0]
     assert hands["left_keypoints_2d"][0, :, 0].max() < 640 <= hands["right_keypoints_2d"][0, :, 0].min()
     for side in ("left", "right"):
         assert hands[f"{side}_reprojection_error_px"][0] <= 0.03 * box_size(hands[f"{side}_keypoints_2d"])[0]
+    own = [read_hands(tmp_path / "out" / "hands" / f"{i}.npz") for i in (0, 1)]
+    assert sorted((h["left_valid"][0], h["right_valid"][0]) for h in own) == [(False, True), (True, False)]
+    people = json.loads((tmp_path / "out" / "keypoints" / "two_keypoints.json").read_text())["people"]
+    assert sorted(p["person_id"][0] for p in people) == [0, 1]
+    assert all(bool(any(p["hand_left_keypoints_2d"])) != bool(any(p["hand_right_keypoints_2d"])) for p in people)
 
 
 def test_no_hand_is_not_valid_and_exits_0(tmp_path, capsys):
