@@ -20,7 +20,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from jaxmocap.batching import map_in_buckets
 from jaxmocap.integrate.fitting import OK, FitConfig, fit_one
@@ -30,7 +30,6 @@ from smplx_jax import BodyModel, constants
 from smplx_jax.rotations import rotmat_to_rotvec
 
 WRIST = {"left": constants.LEFT_WRIST, "right": constants.RIGHT_WRIST}
-FINGERS = {"left": slice(25, 40), "right": slice(40, 55)}
 HAND21 = {"left": constants.LEFT_HAND21_FROM_SMPLX, "right": constants.RIGHT_HAND21_FROM_SMPLX}
 FREE = {"left": LEFT_HAND_IK_JOINTS, "right": RIGHT_HAND_IK_JOINTS}
 BUCKETS = (64,)  # one padded batch size: tracing the two solves takes ~12 s, so one compiled fit serves all
@@ -50,7 +49,7 @@ class HandFit(NamedTuple):
     hand_pose: Float[Array, "*T 15 3"]
     camera_scale: Float[Array, "*T"]
     camera_trans: Float[Array, "*T 2"]
-    valid: Float[Array, "*T"]
+    valid: Bool[Array, "*T"]
     reprojection_error_px: Float[Array, "*T"]
 
 

@@ -8,6 +8,7 @@ likeliest of each side) -> OpenPose JSON of the hands, overlay, glTF.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -82,27 +83,10 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     tracker = HandTracker(static_image_mode=still, max_hands=config.max_hands,
                           redetect_every=search_interval(media.fps))
     store = ChunkStore(out_dir, chunk_key(config, model_sha256) | {"version": SETTINGS_VERSION}, HandChunk)
-    keypoint_models = {side: hand_keypoint_model(model, side) for side in SIDES}
     chrono = Chrono()
-    chunks = []
-    from tqdm import tqdm
-
-    with tqdm(total=media.frame_count, unit="frame", desc="hands", disable=not config.progress) as bar:
-        for index, batch in enumerate(_batches(frames, config.chunk_size, chrono)):
-            ids = np.asarray([i for i, _ in batch])
-            chunk = store.load(index)
-            if chunk is None or not np.array_equal(chunk.frame_index, ids):
-                chunk = solve_hand_chunk(tracker, model, keypoint_models, regression, config.iterations, ids,
-                                         [frame for _, frame in batch], chrono)
-                store.save(index, chunk)
-                with chrono("keypoints"):
-                    write_hand_keypoints(out_dir / "keypoints", media, chunk, sum(len(c.frame_index) for c in chunks),
-                                         config.max_hands)
-            else:
-                tracker.restore(chunk.tracking)
-            chunks.append(chunk)
-            bar.update(len(ids))
-            bar.set_postfix(fps=f"{sum(len(c.frame_index) for c in chunks) / max(chrono.total, 1e-9):.1f}")
+    solve = functools.partial(solve_hand_chunk, tracker, model, {s: hand_keypoint_model(model, s) for s in SIDES},
+                              regression, config.iterations)
+    chunks = list(solved_hand_chunks(config, media, frames, tracker, store, solve, out_dir, chrono))
     frames_total = sum(len(c.frame_index) for c in chunks)
     table = whole_table(chunks)
     meta = {"fps": np.asarray(media.fps), "image_size": np.asarray(media.size),
@@ -130,6 +114,30 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     valid = int((hands["left_valid"] | hands["right_valid"]).sum())
     return RunReport(written[0], frames_total, valid, dict(chrono.seconds), written,
                      sorted(int(i) for i in np.unique(table["hand_id"])))
+
+
+def solved_hand_chunks(config: RunConfig, media, frames, tracker: HandTracker, store: ChunkStore, solve,
+                       out_dir: Path, chrono: Chrono):
+    """Each chunk of frames, from the store if it holds it (the tracker restored from it), else solved
+    (``solve(ids, frames, chrono)``), stored, and its hands written as OpenPose JSON."""
+    from tqdm import tqdm
+
+    done = 0
+    with tqdm(total=media.frame_count, unit="frame", desc="hands", disable=not config.progress) as bar:
+        for index, batch in enumerate(_batches(frames, config.chunk_size, chrono)):
+            ids = np.asarray([i for i, _ in batch])
+            chunk = store.load(index)
+            if chunk is None or not np.array_equal(chunk.frame_index, ids):
+                chunk = solve(ids, [frame for _, frame in batch], chrono)
+                store.save(index, chunk)
+                with chrono("keypoints"):
+                    write_hand_keypoints(out_dir / "keypoints", media, chunk, done, config.max_hands)
+            else:
+                tracker.restore(chunk.tracking)
+            yield chunk
+            done += len(ids)
+            bar.update(len(ids))
+            bar.set_postfix(fps=f"{done / max(chrono.total, 1e-9):.1f}")
 
 
 def solve_hand_chunk(tracker: HandTracker, model, keypoint_models, regression, iterations: int, ids: np.ndarray,
