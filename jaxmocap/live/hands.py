@@ -54,10 +54,6 @@ class HandState(NamedTuple):
     camera: Filtered  # (1, 3): scale, tx, ty
 
 
-def _hand_rotations(fit: HandFit) -> Float[Array, "16 3"]:
-    return jnp.concatenate([fit.global_orient[None], fit.hand_pose])
-
-
 @functools.partial(jax.jit, static_argnames=("settings",))
 def hand_step(km: KeypointModel, left: Bool[Array, ""], world: Float[Array, "21 3"], keypoints: Float[Array, "21 3"],
               state: HandState, fresh: Bool[Array, ""], dt: Float[Array, ""], settings: HandSettings
@@ -71,7 +67,7 @@ def hand_step(km: KeypointModel, left: Bool[Array, ""], world: Float[Array, "21 
     fitted = hand_fit_from(km, left, keypoints, pose, dataclasses.replace(HAND_FIT,
                                                                           iterations=settings.fit_iterations))
     camera = jnp.concatenate([fitted.camera_scale[None], fitted.camera_trans])[None]
-    rotations = _hand_rotations(fitted)
+    rotations = jnp.concatenate([fitted.global_orient[None], fitted.hand_pose])  # (16, 3)
     begin = jax.tree.map(lambda a, b: jnp.where(fresh, a, b),
                          HandState(pose, quaternion_state(rotations), start_state(camera)), state)
     rotations, rotation_state = one_euro_rotvecs(rotations, begin.rotations, dt, settings.rotations)
