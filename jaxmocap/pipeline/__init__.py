@@ -7,7 +7,8 @@ Modules: `config` (`RunConfig`), `job` (`run`, which reads as its stages), `stag
 bodies -> fits -> smoothed -> motion arrays), `regress` (FrankMocap's regressors in place of IK and fit), `records`
 (what the stages hand each other), `chunks` (the resumable chunk store), `outputs` (OpenPose JSON, overlay,
 exports, FrankMocap pickles), `observe` (the detector's person as arrays, repaired), `fit_folder` (``jaxmocap
-fit``), `chrono` (stage timing), `exemplar` and `hand_boxes` (parts of the regressors' path).
+fit``), `chrono` (stage timing), `exemplar` and `hand_boxes` (parts of the regressors' path); `hands_job` is
+``--mode hands`` (hands alone: ``hands.npz``).
 """
 
 from jaxmocap.pipeline.config import RunConfig

@@ -77,7 +77,7 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     if config.weights is not None:
         from jaxmocap.pipeline.regress import Regression
 
-        regression = Regression.load(config.weights, model, None)
+        regression = Regression.load(config.weights, model)
     media, frames = open_media(config.source, config.start, config.end, config.stride)
     still = media.kind in ("image", "images")
     tracker = HandTracker(static_image_mode=still, max_hands=config.max_hands,
