@@ -257,3 +257,9 @@ def test_fit_recovers_the_hands_it_was_made_from():
         assert fit.valid.all() and fit.reprojection_error_px.max() < 0.5
         error = np.linalg.norm(joints - truth, axis=-1)
         assert error.max() < 0.006 and error.mean() < 0.001, (side, error.max(), error.mean())
+
+
+def test_hands_export_glTF_only_and_say_so(tmp_path, capsys):
+    code = main(["run", str(CLOSEUP), "--mode", "hands", "--export", "bvh", "--out", str(tmp_path), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "glTF only" in err
