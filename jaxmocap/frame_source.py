@@ -34,8 +34,9 @@ class Media:
 
 
 def read_image(path) -> np.ndarray:
-    """An image file as OpenCV decodes it (any depth and channels), or `MediaError`."""
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    """An image file as an 8-bit BGR array, turned upright as its EXIF orientation says (a phone's portrait photo),
+    or `MediaError`; grayscale, 16-bit and alpha images are converted."""
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None or image.size == 0:
         raise MediaError(f"cannot read image {path} (missing, empty or not an image format OpenCV can decode)")
     return image
@@ -99,7 +100,7 @@ def _prefetch(frames: Iterator, depth: int = 8) -> Iterator:
 
 
 def open_media(source, start: int = 0, end: int | None = None, stride: int = 1) -> tuple[Media, Iterator]:
-    """The input's description and an iterator of ``(frame index, BGR-or-raw frame)`` over frames
+    """The input's description and an iterator of ``(frame index, BGR frame)`` over frames
     ``start, start + stride, ... < end``. Video frames are decoded ahead in a background thread."""
     if start < 0 or stride < 1 or (end is not None and end <= start):
         raise MediaError(f"bad frame range start={start} end={end} stride={stride}")

@@ -263,3 +263,22 @@ def test_hands_export_glTF_only_and_say_so(tmp_path, capsys):
     code = main(["run", str(CLOSEUP), "--mode", "hands", "--export", "bvh", "--out", str(tmp_path), "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "glTF only" in err
+
+
+def _with_exif_orientation(jpeg: bytes, orientation: int) -> bytes:
+    """A JPEG with an EXIF APP1 segment holding only the orientation tag (as a phone writes a portrait photo)."""
+    tiff = b"II*\x00\x08\x00\x00\x00" + b"\x01\x00" + b"\x12\x01\x03\x00\x01\x00\x00\x00" + bytes([orientation, 0, 0, 0])
+    exif = b"Exif\x00\x00" + tiff + b"\x00\x00\x00\x00"
+    return jpeg[:2] + b"\xff\xe1" + (len(exif) + 2).to_bytes(2, "big") + exif + jpeg[2:]
+
+
+def test_a_phone_photo_is_read_upright(still, tmp_path):
+    """A JPEG stored sideways with EXIF orientation 6 (turn 90 degrees clockwise to view) is fitted upright."""
+    sideways = cv2.rotate(cv2.imread(str(CLOSEUP)), cv2.ROTATE_90_COUNTERCLOCKWISE)
+    photo = tmp_path / "photo.jpg"
+    photo.write_bytes(_with_exif_orientation(cv2.imencode(".jpg", sideways, [cv2.IMWRITE_JPEG_QUALITY, 95])[1]
+                                             .tobytes(), 6))
+    run(RunConfig(photo, mode="hands", overlay=False, progress=False), tmp_path / "out")
+    hands, upright = read_hands(tmp_path / "out" / "hands.npz"), still[2]
+    assert hands["image_size"].tolist() == [640, 480] and hands["left_valid"][0]
+    assert np.abs(hands["left_keypoints_2d"][0, :, :2] - upright["left_keypoints_2d"][0, :, :2]).max() < 10.0
