@@ -267,7 +267,8 @@ def test_hands_export_glTF_only_and_say_so(tmp_path, capsys):
 
 def _with_exif_orientation(jpeg: bytes, orientation: int) -> bytes:
     """A JPEG with an EXIF APP1 segment holding only the orientation tag (as a phone writes a portrait photo)."""
-    tiff = b"II*\x00\x08\x00\x00\x00" + b"\x01\x00" + b"\x12\x01\x03\x00\x01\x00\x00\x00" + bytes([orientation, 0, 0, 0])
+    entry = b"\x12\x01\x03\x00\x01\x00\x00\x00" + bytes([orientation, 0, 0, 0])  # tag 0x0112, SHORT, 1 value
+    tiff = b"II*\x00\x08\x00\x00\x00" + b"\x01\x00" + entry  # little-endian header, one IFD entry
     exif = b"Exif\x00\x00" + tiff + b"\x00\x00\x00\x00"
     return jpeg[:2] + b"\xff\xe1" + (len(exif) + 2).to_bytes(2, "big") + exif + jpeg[2:]
 
