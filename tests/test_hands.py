@@ -102,7 +102,7 @@ def test_mirrored_image_swaps_the_side_and_mirrors_the_fit():
     fits = {}
     for picture in (image, np.ascontiguousarray(image[:, ::-1])):
         (hand,) = tracker(picture)
-        keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
+        keypoints = hand.keypoints_2d
         fit = fit_hands(MODEL, hand.side, hand.world[None], np.ones((1, 21)), keypoints[None])
         joints = hand_meshes(smplx_jax.hand_model(MODEL, hand.side), fit.global_orient, fit.hand_pose).joints
         fits[hand.side] = (np.asarray(joints)[0], keypoints)

@@ -32,9 +32,8 @@ def hands_openpose(sides, keypoints, scores, hand_ids, max_hands: int = 2) -> tu
 
 def _rows(hands: list[Hand]):
     """`hands_openpose`'s arguments of the tracker's hands."""
-    keypoints = [np.concatenate([h.keypoints[:, :2], np.full((21, 1), h.score)], axis=1) for h in hands]
-    return ([SIDES.index(h.side) for h in hands], np.asarray(keypoints).reshape(-1, 21, 3), [h.score for h in hands],
-            [h.hand_id for h in hands])
+    keypoints = np.asarray([h.keypoints_2d for h in hands]).reshape(-1, 21, 3)
+    return [SIDES.index(h.side) for h in hands], keypoints, [h.score for h in hands], [h.hand_id for h in hands]
 
 
 def detect_hands_media(input: str | os.PathLike, out_dir: str | os.PathLike, overlay: bool = False,

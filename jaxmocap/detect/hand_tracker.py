@@ -34,6 +34,11 @@ class Hand:
     right_score: float
     box: np.ndarray
 
+    @property
+    def keypoints_2d(self) -> np.ndarray:
+        """(21, 3) pixels x, y and the hand's presence as each point's confidence (OpenPose's layout)."""
+        return np.concatenate([self.keypoints[:, :2], np.full((21, 1), self.score)], axis=1)
+
 
 @dataclass
 class _Track:

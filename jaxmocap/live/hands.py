@@ -105,13 +105,12 @@ class HandSolver:
         """Each hand of one frame at ``now`` seconds (the frame's time), by ``hand_id``."""
         solved = {}
         for hand in hands:
-            keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
             state, last = self.hands.get(hand.hand_id, (None, -np.inf))
             fresh = state is None or now - last > self.settings.reset_after
             state = fresh_hand_state() if fresh else state
             dt = max(now - last, 1e-3) if not fresh else 1.0
             for _ in range(self.settings.warm_up if fresh else 1):
-                out, state = self._step(hand.side, hand.world, keypoints, state, fresh, dt)
+                out, state = self._step(hand.side, hand.world, hand.keypoints_2d, state, fresh, dt)
             solved[hand.hand_id] = jax.tree.map(np.asarray, out)
             self.hands[hand.hand_id] = (state, now)
         return solved
@@ -119,13 +118,12 @@ class HandSolver:
 
 def hand_entry(hand: Hand, fit: HandFit) -> dict:
     """One hand's entry of a frame message: identity, side, the hands.npz keys of the hand, and its keypoints."""
-    keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
     return {"id": int(hand.hand_id), "side": hand.side,
             "global_orient": np.round(np.asarray(fit.global_orient, np.float64), 5).tolist(),
             "hand_pose": np.round(np.asarray(fit.hand_pose, np.float64), 5).tolist(),
             "camera_scale": round(float(fit.camera_scale), 4),
             "camera_trans": np.round(np.asarray(fit.camera_trans, np.float64), 3).tolist(),
-            "keypoints_2d": np.round(keypoints, 2).tolist()}
+            "keypoints_2d": np.round(hand.keypoints_2d, 2).tolist()}
 
 
 class HandRecorder:
@@ -140,12 +138,12 @@ class HandRecorder:
         self.rows: list[dict] = []
 
     def add(self, frame: int, seconds: float, hands: list[Hand], solved: dict[int, HandFit]) -> None:
+        """One solved frame: the source frame's number and time, its hands and their fits by ``hand_id``."""
         for hand in hands:
             fit = solved[hand.hand_id]
-            keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
             self.rows.append({"frame": len(self.frames), "hand_id": hand.hand_id, "side": SIDES.index(hand.side),
-                              "keypoints_2d": keypoints, "world": hand.world, "score": hand.score, "box": hand.box}
-                             | {k: getattr(fit, k) for k in FIT_COLUMNS})
+                              "keypoints_2d": hand.keypoints_2d, "world": hand.world, "score": hand.score,
+                              "box": hand.box} | {k: getattr(fit, k) for k in FIT_COLUMNS})
         self.frames.append((frame, seconds))
 
     def write(self, folder: Path) -> list[Path]:

@@ -156,8 +156,8 @@ def detected(tracker: HandTracker, frames: list[np.ndarray]) -> dict[str, np.nda
     rows = []
     for n, frame in enumerate(frames):
         for hand in tracker(frame):
-            keypoints = np.concatenate([hand.keypoints[:, :2], np.full((21, 1), hand.score)], axis=1)
-            rows.append((n, hand.hand_id, SIDES.index(hand.side), keypoints, hand.world, hand.score, hand.box))
+            rows.append((n, hand.hand_id, SIDES.index(hand.side), hand.keypoints_2d, hand.world, hand.score,
+                         hand.box))
     names = ("frame", "hand_id", "side", "keypoints_2d", "world", "score", "box")
     return {name: np.asarray([r[k] for r in rows], np.float32 if k > 2 else np.int64).reshape(
         (len(rows),) + COLUMNS[name]) for k, name in enumerate(names)}
