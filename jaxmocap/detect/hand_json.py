@@ -6,14 +6,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from ..frame_source import MediaError, open_media
-from .detector import as_bgr, search_interval
-from .draw import draw_openpose
+from .detector import search_interval
 from .hand_tracker import SIDES, Hand, HandTracker
-from .openpose import json_name, write_openpose_json
+from .json_output import write_detections
 
 
 def hands_openpose(sides, keypoints, scores, hand_ids, max_hands: int = 2) -> tuple[np.ndarray, list[int] | None]:
@@ -42,36 +39,9 @@ def detect_hands_media(input: str | os.PathLike, out_dir: str | os.PathLike, ove
     """Hands in a video file or webcam (tracked), an image folder or one image (each on its own), written as in
     `detect_media` (the same names and overlays), hands only: ``"pose_keypoints_2d": []``, as OpenPose writes with
     ``--body 0`` (`hands_openpose`). Returns the JSON paths in frame order."""
-    from tqdm import tqdm
+    def detect_in(media, still):
+        tracker = HandTracker(static_image_mode=still, max_hands=max_hands, model_dir=model_dir,
+                              redetect_every=search_interval(media.fps))
+        return lambda image: hands_openpose(*_rows(tracker(image)), max_hands)
 
-    media, frames = open_media(input)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    still = media.kind in ("image", "images")
-    tracker = HandTracker(static_image_mode=still, max_hands=max_hands, model_dir=model_dir,
-                          redetect_every=search_interval(media.fps))
-    written: list[Path] = []
-    writer = None
-    if overlay and still:
-        (out / "overlay").mkdir(exist_ok=True)
-    try:
-        for n, (index, frame) in enumerate(tqdm(frames, total=media.frame_count, desc="detect hands",
-                                                 unit="img" if still else "frame", disable=not progress)):
-            try:
-                image = as_bgr(frame)
-            except ValueError as err:
-                raise MediaError(f"{input}: frame {index}: {err}") from None
-            keypoints, ids = hands_openpose(*_rows(tracker(image)), max_hands)
-            name = json_name(media.stems[n], None) if still else json_name(media.stem, index)
-            written.append(write_openpose_json(out / name, keypoints, ids, body=False))
-            if overlay and still:
-                cv2.imwrite(str(out / "overlay" / f"{media.stems[n]}.jpg"), draw_openpose(image, keypoints))
-            elif overlay:
-                if writer is None:
-                    writer = cv2.VideoWriter(str(out / f"{media.stem}_overlay.mp4"),
-                                             cv2.VideoWriter_fourcc(*"mp4v"), media.fps, media.size)
-                writer.write(draw_openpose(image, keypoints))
-    finally:
-        if writer is not None:
-            writer.release()
-    return written
+    return write_detections(input, out_dir, overlay, progress, "detect hands", detect_in, body=False)

@@ -39,32 +39,47 @@ def detect_media(input: str | os.PathLike, out_dir: str | os.PathLike, overlay: 
     Returns the JSON paths in frame order. Raises ``MediaError`` for unreadable input (and ``ModelFileError``
     when the model files cannot be had).
     """
+    def detect_in(media, still):
+        detector = Detector(static_image_mode=still, max_people=max_people, hands=hands, model_dir=model_dir,
+                            redetect_every=search_interval(media.fps))
+        tracker = None if still else IdentityTracker()
+
+        def keypoints_of(image):
+            people = detector(image)
+            ids = identify(tracker, image, people)
+            order = np.argsort(ids, kind="stable")
+            return to_openpose([people[k] for k in order]), [ids[k] for k in order] if tracker else None
+        return keypoints_of
+
+    return write_detections(input, out_dir, overlay, progress, "detect", detect_in)
+
+
+def write_detections(input, out_dir, overlay: bool, progress: bool, desc: str, detect_in, body: bool = True
+                     ) -> list[Path]:
+    """`detect_media`'s loop over the frames of ``input``: ``detect_in(media, still)`` makes the per-image
+    ``(keypoints (P, 67, 3), person ids or None)`` function; the JSON (``body``: with BODY_25, else hands only)
+    and the overlays are written as `detect_media` says."""
     from tqdm import tqdm
 
     media, frames = open_media(input)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     still = media.kind in ("image", "images")
-    detector = Detector(static_image_mode=still, max_people=max_people, hands=hands, model_dir=model_dir,
-                        redetect_every=search_interval(media.fps))
-    tracker = None if still else IdentityTracker()
+    keypoints_of = detect_in(media, still)
     written: list[Path] = []
     writer = None
     if overlay and still:
         (out / "overlay").mkdir(exist_ok=True)
     try:
-        for n, (index, frame) in enumerate(tqdm(frames, total=media.frame_count, desc="detect",
+        for n, (index, frame) in enumerate(tqdm(frames, total=media.frame_count, desc=desc,
                                                  unit="img" if still else "frame", disable=not progress)):
             try:
                 image = as_bgr(frame)
             except ValueError as err:
                 raise MediaError(f"{input}: frame {index}: {err}") from None
-            people = detector(image)
-            ids = identify(tracker, image, people)
-            order = np.argsort(ids, kind="stable")
-            keypoints = to_openpose([people[k] for k in order])
+            keypoints, ids = keypoints_of(image)
             name = json_name(media.stems[n], None) if still else json_name(media.stem, index)
-            written.append(write_openpose_json(out / name, keypoints, [ids[k] for k in order] if tracker else None))
+            written.append(write_openpose_json(out / name, keypoints, ids, body=body))
             if overlay and still:
                 cv2.imwrite(str(out / "overlay" / f"{media.stems[n]}.jpg"), draw_openpose(image, keypoints))
             elif overlay:
