@@ -8,8 +8,6 @@ fit's targets) and ``reprojection_error_px (T,)``; then ``fps``, ``image_size`` 
 body model's mean shape) a hand joint lands at pixel ``camera_scale * X[..., :2] + camera_trans``.
 """
 
-import io
-import zipfile
 from pathlib import Path
 
 import jax
@@ -19,7 +17,7 @@ import numpy as np
 import smplx_jax
 from jaxmocap.batching import map_in_buckets
 from jaxmocap.errors import InputError
-from jaxmocap.io import atomic_write_bytes
+from jaxmocap.io import read_result_npz, write_result_npz
 from smplx_jax.rotations import rotvec_to_rotmat
 
 SIDES = ("left", "right")
@@ -47,26 +45,12 @@ def _check(hands: dict, where: str) -> None:
 def write_hands(path, hands: dict) -> Path:
     """Check the arrays and write them atomically as ``.npz`` (float32 values, bool ``valid``)."""
     _check(hands, str(path))
-    arrays = {k: np.asarray(v).astype(np.float32) if np.asarray(v).dtype == np.float64 and k != "fps"
-              else np.asarray(v) for k, v in hands.items()}
-    for side in SIDES:
-        arrays[f"{side}_valid"] = np.asarray(hands[f"{side}_valid"], bool)
-    arrays["model_sha256"] = np.asarray(str(hands["model_sha256"]))
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    return atomic_write_bytes(path, buffer.getvalue())
+    return write_result_npz(path, hands, tuple(f"{side}_valid" for side in SIDES))
 
 
 def read_hands(path) -> dict[str, np.ndarray]:
     """The arrays of a ``hands.npz``, or `InputError` naming the problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"hands file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            hands = {k: data[k] for k in data.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        raise InputError(f"{path} is not a readable hands .npz ({err})") from None
+    hands = read_result_npz(path, "hands")
     _check(hands, str(path))
     return hands
 

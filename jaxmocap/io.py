@@ -1,10 +1,18 @@
-"""File helpers: atomic writes (`smplx_jax.io`, shared with the body model's cache) and checksums."""
+"""File helpers: atomic writes (`smplx_jax.io`, shared with the body model's cache), checksums, and the result
+files' ``.npz`` (motion.npz, hands.npz) written and read."""
 
 import hashlib
+import io
+import zipfile
+from pathlib import Path
 
+import numpy as np
+
+from jaxmocap.errors import InputError
 from smplx_jax.io import atomic_path, atomic_write_bytes, atomic_write_text
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "file_sha256"]
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "file_sha256", "read_result_npz",
+           "write_result_npz"]
 
 
 def file_sha256(path) -> str:
@@ -13,3 +21,26 @@ def file_sha256(path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def write_result_npz(path, arrays: dict, bools: tuple[str, ...]) -> Path:
+    """A result file (motion.npz, hands.npz) written atomically: float64 values as float32 (but ``fps``), the
+    ``bools`` keys as bool, ``model_sha256`` as a string."""
+    out = {k: np.asarray(v).astype(np.float32) if np.asarray(v).dtype == np.float64 and k != "fps" else np.asarray(v)
+           for k, v in arrays.items()}
+    out |= {k: np.asarray(arrays[k], bool) for k in bools} | {"model_sha256": np.asarray(str(arrays["model_sha256"]))}
+    buffer = io.BytesIO()
+    np.savez(buffer, **out)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def read_result_npz(path, what: str) -> dict[str, np.ndarray]:
+    """The arrays of a result ``.npz`` (``what``: "motion", "hands"), or `InputError` naming the problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{what} file not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
+        raise InputError(f"{path} is not a readable {what} .npz ({err})") from None

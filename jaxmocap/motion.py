@@ -9,15 +9,13 @@ exact pixels are ``focal_length * X[..., :2] / X[..., 2:] + principal_point``, `
 and ``camera_scale``, ``camera_trans`` are the weak-perspective projection closest to them (`lens`).
 """
 
-import io
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 import smplx_jax
 from jaxmocap.errors import InputError
-from jaxmocap.io import atomic_write_bytes
+from jaxmocap.io import read_result_npz, write_result_npz
 
 # key -> shape after the frame axis ("B": num_betas), or None for a scalar
 MOTION_SHAPES = {
@@ -60,27 +58,12 @@ def _check(motion: dict, where: str) -> None:
 def write_motion(path, motion: dict) -> Path:
     """Check the arrays and write them atomically as ``.npz`` (float32 parameters)."""
     _check(motion, str(path))
-    arrays = {}
-    for key, value in motion.items():
-        value = np.asarray(value)
-        arrays[key] = value.astype(np.float32) if value.dtype == np.float64 and key not in ("fps",) else value
-    arrays["valid"] = np.asarray(motion["valid"], bool)
-    arrays["model_sha256"] = np.asarray(str(motion["model_sha256"]))
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    return atomic_write_bytes(path, buffer.getvalue())
+    return write_result_npz(path, motion, ("valid",))
 
 
 def read_motion(path) -> dict[str, np.ndarray]:
     """The arrays of a ``motion.npz``, or `InputError` naming the problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"motion file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            motion = {k: data[k] for k in data.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
-        raise InputError(f"{path} is not a readable motion .npz ({err})") from None
+    motion = read_result_npz(path, "motion")
     _check(motion, str(path))
     return motion
 
