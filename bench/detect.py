@@ -79,6 +79,18 @@ def mediapipe_python(given: str | None) -> str | None:
     return str(path)
 
 
+def run_peer(peer_python: str | None, script: str, clip: Path, frames: int) -> dict:
+    """The peer's JSON result of ``script`` on ``frames`` frames of ``clip`` in the mediapipe Python; without it,
+    or when it fails (a line says why), no results."""
+    if peer_python is not None:
+        proc = subprocess.run([peer_python, "-c", script, str(clip), str(frames)], capture_output=True, text=True)
+        if proc.returncode == 0:
+            return json.loads(proc.stdout.strip().splitlines()[-1])
+        last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+        print(f"mediapipe peer failed in {peer_python} ({last}); its rows read n/a. {SETUP}", file=sys.stderr)
+    return {"version": None, "results": {}}
+
+
 def read_frames(n: int):
     import cv2
 
@@ -123,14 +135,7 @@ def main() -> None:
     rows["jaxmocap pose+hands (tracking)"] = {"ms_per_frame": ms, "frames_with_body": bodies, "hands": hands}
     ms, bodies, _ = time_ours(frames, hands=False)
     rows["jaxmocap pose (tracking)"] = {"ms_per_frame": ms, "frames_with_body": bodies}
-    peer = {"version": None, "results": {}}
-    if peer_python is not None:
-        proc = subprocess.run([peer_python, "-c", PEER, str(CLIP), str(len(frames))], capture_output=True, text=True)
-        if proc.returncode == 0:
-            peer = json.loads(proc.stdout.strip().splitlines()[-1])
-        else:
-            last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
-            print(f"mediapipe peer failed in {peer_python} ({last}); its rows read n/a. {SETUP}", file=sys.stderr)
+    peer = run_peer(peer_python, PEER, CLIP, len(frames))
     for name in ("holistic", "pose+hands", "pose"):
         value = peer["results"].get(name)
         rows[f"mediapipe {peer['version'] or ''} {name} (video mode)".replace("  ", " ")] = (

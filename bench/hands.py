@@ -17,7 +17,6 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import sys
 import tempfile
 import time
@@ -27,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CLIP = ROOT / "tests" / "data" / "pose2sim_hand_closeup.mp4"
 sys.path.insert(0, str(ROOT / "bench"))
 
-from detect import MEDIAPIPE_ENV, MEDIAPIPE_VERSION, SETUP, mediapipe_python  # noqa: E402
+from detect import MEDIAPIPE_ENV, MEDIAPIPE_VERSION, mediapipe_python, run_peer  # noqa: E402
 
 PEER = r"""
 import json, sys, time, cv2, mediapipe as mp
@@ -113,14 +112,7 @@ def main() -> None:
         ms, found = ours_tracker(frames, hands)
         rows[f"jaxmocap hand tracker, max {hands} hand(s)"] = {"frames_per_s": 1000 / ms, "ms_per_frame": ms,
                                                                "valid": found}
-    peer = {"version": None, "results": {}}
-    if peer_python is not None:
-        proc = subprocess.run([peer_python, "-c", PEER, str(CLIP), str(len(frames))], capture_output=True, text=True)
-        if proc.returncode == 0:
-            peer = json.loads(proc.stdout.strip().splitlines()[-1])
-        else:
-            last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
-            print(f"mediapipe peer failed in {peer_python} ({last}); its rows read n/a. {SETUP}", file=sys.stderr)
+    peer = run_peer(peer_python, PEER, CLIP, len(frames))
     for hands in ("1", "2"):
         value = peer["results"].get(hands)
         name = f"mediapipe {peer['version'] or ''} hands, max {hands} hand(s), landmarks only".replace("  ", " ")
