@@ -78,7 +78,7 @@ class HandTracker:
         self.redetect_every = redetect_every
         self.remember = remember
         self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
-                                    paths["hand_recrop.tflite"], num_threads)
+                                    num_threads=num_threads)
         self._tracks: list[_Track] = []
         self._lost: list[_Track] = []  # lost within `remember` frames
         self._frame = 0

@@ -110,12 +110,13 @@ def keeps_tracking(previous: HandResult, recrop: Rect, image_size: tuple[int, in
 
 
 class HandEstimator:
-    """Palm detector, hand landmark model and holistic's hand recrop model."""
+    """Palm detector, hand landmark model and holistic's hand recrop model (not loaded without ``recrop_path``:
+    hands found without a body)."""
 
-    def __init__(self, palm_path, landmark_path, recrop_path, num_threads: int = 2):
+    def __init__(self, palm_path, landmark_path, recrop_path=None, num_threads: int = 2):
         self._palm = TFLiteModel(palm_path, num_threads)
         self._landmarker = TFLiteModel(landmark_path, num_threads)
-        self._recrop = TFLiteModel(recrop_path, num_threads)
+        self._recrop = None if recrop_path is None else TFLiteModel(recrop_path, num_threads)
         self._anchors = ssd_anchor_centers(PALM_SIZE, [8, 16, 16, 16])
 
     def detect(self, image: np.ndarray, min_score: float = MIN_PALM_SCORE) -> list[Detection]:
