@@ -1,12 +1,11 @@
 """Reading and checking SMPL-X model files (``.npz`` and ``.pkl``) into plain float64 numpy arrays."""
 
-import pickle
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from smplx_jax import constants
+from smplx_jax import constants, safe_pickle
 
 REQUIRED_KEYS = (
     "v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f",
@@ -54,9 +53,11 @@ def _read_npz(path):
 def _read_pkl(path):
     try:
         with open(path, "rb") as fh:
-            data = _ModelUnpickler(fh, encoding="latin1").load()
-    except ModelFileError:
-        raise
+            data = safe_pickle.load(fh, _stand_in)
+    except safe_pickle.RefusedPickle as err:
+        raise ModelFileError(
+            f"{path} refers to {err.reference}, which an SMPL-X, SMPL-H or MANO model file does not hold: "
+            "refused before anything in it was run") from None
     except Exception as err:  # a corrupt pickle can raise almost anything
         raise ModelFileError(f"{path} is not a readable .pkl model file ({type(err).__name__}: {err})") from None
     if not isinstance(data, dict):
@@ -102,24 +103,17 @@ class _Csc(_Sparse):
     by_columns = True
 
 
-class _ModelUnpickler(pickle.Unpickler):
-    """Unpickles numpy arrays, chumpy leaves and scipy sparse matrices; refuses anything else."""
+_SPARSE = {"csr_matrix": _Sparse, "csr_array": _Sparse, "csc_matrix": _Csc, "csc_array": _Csc}
 
-    _ALLOWED = {("copy_reg", "_reconstructor"), ("copyreg", "_reconstructor"), ("__builtin__", "object"),
-                ("builtins", "object"), ("_codecs", "encode")}
 
-    def find_class(self, module, name):
-        if module.startswith("chumpy"):
-            return _Chumpy
-        if module.startswith("scipy.sparse"):
-            if "csr" in name:
-                return _Sparse
-            if "csc" in name:
-                return _Csc
-            raise ModelFileError(f"unsupported sparse matrix type {module}.{name} in the model file")
-        if module.split(".")[0] == "numpy" or (module, name) in self._ALLOWED:
-            return super().find_class(module, name)
-        raise ModelFileError(f"the model file refers to {module}.{name}, which a model file should not hold")
+def _stand_in(module: str, name: str) -> type | None:
+    """The inert class read in place of a chumpy ``Ch`` (any chumpy class: only a stored value is kept) or a scipy
+    CSR/CSC matrix, as the official ``.pkl`` files hold them; None for anything else."""
+    if module.split(".")[0] == "chumpy":
+        return _Chumpy
+    if module in ("scipy.sparse.csr", "scipy.sparse._csr", "scipy.sparse.csc", "scipy.sparse._csc"):
+        return _SPARSE.get(name)
+    return None
 
 
 def _dense(value):

@@ -10,6 +10,7 @@ from jaxmocap.regressors import weights
 from jaxmocap.regressors.body import BodyConfig
 from jaxmocap.regressors.hand import HandConfig
 from jaxmocap.regressors.weights import WeightsError
+from smplx_jax import safe_pickle
 
 _HAND_PREFIXES = (("main_encoder.fc1.", "fc1."), ("main_encoder.", "encoder."), ("feat_encoder.1.", "feat_encoder."),
                   ("regressor.0.", "regressor."))
@@ -93,27 +94,17 @@ def _body_name(key: str) -> str:
     return "encoder." + key if key.startswith(_ENCODER) else key
 
 
-class _ArrayUnpickler(pickle.Unpickler):
-    """Unpickles plain containers and numpy arrays only."""
-
-    _ALLOWED = {("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct"),
-                ("numpy", "ndarray"), ("numpy", "dtype"), ("numpy.core.multiarray", "scalar"),
-                ("numpy._core.multiarray", "scalar")}
-
-    def find_class(self, module, name):
-        if (module, name) not in self._ALLOWED:
-            raise pickle.UnpicklingError(f"refusing to load {module}.{name}")
-        return super().find_class(module, name)
-
-
 def _hand_mean_params(path: Path) -> np.ndarray:
     """cam [5, 0, 0] + wrist [0, 0, 0] + mean_pose[3:] + 10 zero betas (FrankMocap builds it so at load)."""
     try:
         with open(path, "rb") as f:
-            data = _ArrayUnpickler(f, encoding="latin1").load()
+            data = safe_pickle.load(f)
         mean_pose = np.asarray(data["mean_pose"], np.float32).reshape(-1)
     except FileNotFoundError:
         raise WeightsError(f"--hand-mean {path}: no such file") from None
+    except safe_pickle.RefusedPickle as err:
+        raise WeightsError(f"--hand-mean {path} refers to {err.reference}, which FrankMocap's mean_mano_params.pkl "
+                           "does not hold: refused before anything in it was run") from None
     except (OSError, EOFError, pickle.UnpicklingError, TypeError, KeyError, ValueError, IndexError) as err:
         raise WeightsError(f"--hand-mean {path}: not FrankMocap's mean_mano_params.pkl ({_one_line(err)})") from None
     if mean_pose.shape != (48,):

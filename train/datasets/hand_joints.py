@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
+from smplx_jax import safe_pickle
 from train.datasets.sample import NUM_HAND_JOINTS, HandSample, box_of_joints, read_colour_image
 
 # OPENPOSE_FROM_X[i] = index, in dataset X's order, of OpenPose hand joint i.
@@ -146,11 +147,15 @@ def require_file(path: Path, expected: str) -> Path:
 
 
 def load_pickled_dict(path: Path, expected: str) -> dict:
-    """The dict pickled (by Python 2, hence latin1) in ``path``; errors name the file and ``expected``."""
+    """The dict pickled (by Python 2, hence latin1) in ``path``, numpy arrays and plain containers only (nothing in
+    the file is run); errors name the file and ``expected``."""
     require_file(path, expected)
     try:
         with path.open("rb") as file:
-            values = pickle.load(file, encoding="latin1")
+            values = safe_pickle.load(file)
+    except safe_pickle.RefusedPickle as error:
+        raise ValueError(f"{path} {error}, which {expected} does not hold: refused before anything in it was "
+                         "run") from None
     except (pickle.UnpicklingError, EOFError, ValueError) as error:
         raise ValueError(f"{path}: corrupt pickle ({error})") from None
     if not isinstance(values, dict):
