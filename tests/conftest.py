@@ -73,3 +73,45 @@ def interrupted_at_chunk(monkeypatch, index: int):
         yield
     finally:
         monkeypatch.setattr(job, "solve_chunk", solve)
+
+
+CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+WEIGHTS_RUN_FRAMES = (20, 28)  # the frames of the sample clip that `frankmocap_run` solves, in chunks of 4
+
+
+@pytest.fixture(scope="session")
+def frankmocap(tmp_path_factory):
+    """FrankMocap-format files of random reference networks (`frankmocap_reference.write_checkpoints`), converted
+    by ``jaxmocap convert-frankmocap`` once per session: ``(folder, hand, body)``, the PyTorch reference modules
+    beside the folder that holds the files and the converted ``weights``."""
+    import frankmocap_reference as ref
+    from jaxmocap.cli import main
+
+    root = tmp_path_factory.mktemp("frankmocap")
+    hand, body = ref.write_checkpoints(root)
+    assert main(["convert-frankmocap", "--hand", str(root / "pose_shape_best.pth"), "--hand-mean",
+                 str(root / "mean_mano_params.pkl"), "--body", str(root / "body.pt"), "--out",
+                 str(root / "weights")]) == 0
+    return root, hand, body
+
+
+@pytest.fixture(scope="session")
+def frankmocap_run(frankmocap, tmp_path_factory):
+    """``frankmocap_run(**options)``: the output folder of ``jaxmocap run`` with the converted weights on
+    `WEIGHTS_RUN_FRAMES` (no smoothing, no overlay, FrankMocap's pickles written), once per session for each set of
+    options (``integration``, ``mode``, ``hand_boxes``, ``end``)."""
+    from jaxmocap.pipeline import RunConfig, run
+
+    done = {}
+
+    def weights_run(**options) -> Path:
+        key = tuple(sorted(options.items()))
+        if key not in done:
+            done[key] = tmp_path_factory.mktemp("frankmocap_run")
+            start, end = WEIGHTS_RUN_FRAMES
+            defaults = dict(weights=frankmocap[0] / "weights", start=start, end=end, chunk_size=4, smooth=False,
+                            overlay=False, progress=False, frankmocap_pkl=True)
+            run(RunConfig(CLIP, **defaults | options), done[key])
+        return done[key]
+
+    return weights_run

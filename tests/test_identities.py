@@ -4,20 +4,19 @@ import numpy as np
 
 from jaxmocap.detect.identities import IdentityTracker
 
-RNG = np.random.default_rng(0)
-SKELETON = RNG.uniform([-40, -90], [40, 90], (33, 2))  # a person 180 px tall about its centre
+SKELETON = np.random.default_rng(0).uniform([-40, -90], [40, 90], (33, 2))  # a person 180 px tall about its centre
 LOOKS = np.eye(2, 72, dtype=np.float32)[:, ::-1] * 0.5 + np.eye(2, 72, 5, dtype=np.float32) * 0.5  # two outfits
 
 
-def person(centre, jitter=2.0):
-    landmarks = np.concatenate([SKELETON + centre + RNG.normal(0, jitter, (33, 2)), np.ones((33, 1))], axis=1)
-    return landmarks
+def person(rng, centre, jitter=2.0):
+    return np.concatenate([SKELETON + centre + rng.normal(0, jitter, (33, 2)), np.ones((33, 1))], axis=1)
 
 
-def frame_ids(tracker, centres, looks):
-    """Ids the tracker gives the people at ``centres``, shown in a shuffled order (as a detector may)."""
-    order = RNG.permutation(len(centres))
-    landmarks = np.stack([person(centres[k]) for k in order]) if len(order) else np.zeros((0, 33, 3))
+def frame_ids(tracker, rng, centres, looks):
+    """Ids the tracker gives the people at ``centres``, shown in a shuffled order (as a detector may); ``rng``
+    (each test's own) jitters and shuffles them."""
+    order = rng.permutation(len(centres))
+    landmarks = np.stack([person(rng, centres[k]) for k in order]) if len(order) else np.zeros((0, 33, 3))
     ids = tracker(landmarks, np.asarray(looks)[order] if len(order) else np.zeros((0, 72)))
     return [ids[list(order).index(k)] for k in range(len(centres))]
 
@@ -25,45 +24,45 @@ def frame_ids(tracker, centres, looks):
 def test_two_people_crossing_keep_their_ids():
     """Two people of the same size walk through each other at the same height in the image, 3 px a frame each
     way (they pass 3 px apart): no swap, with or without telling their clothes apart."""
+    rng = np.random.default_rng(1)
     for looks in (LOOKS, np.zeros((2, 72), np.float32)):
         tracker = IdentityTracker()
-        seen = [frame_ids(tracker, [(100 + 3 * t, 300), (505 - 3 * t, 300)], looks) for t in range(135)]
+        seen = [frame_ids(tracker, rng, [(100 + 3 * t, 300), (505 - 3 * t, 300)], looks) for t in range(135)]
         assert sorted(seen[0]) == [0, 1] and all(ids == seen[0] for ids in seen), looks.any()
 
 
 def test_a_person_hidden_behind_another_is_reidentified():
     """The second person is hidden for 20 frames while passing behind the first; they come back as themselves,
     and someone entering later gets a new id."""
-    tracker = IdentityTracker()
-    frame_ids(tracker, [(300, 300)], LOOKS[:1])
+    tracker, rng = IdentityTracker(), np.random.default_rng(2)
+    frame_ids(tracker, rng, [(300, 300)], LOOKS[:1])
     for t in range(1, 60):
         hidden = 20 <= t < 40
         centres = [(300, 300)] + ([] if hidden else [(100 + 5 * t, 320)])
-        ids = frame_ids(tracker, centres, LOOKS[:len(centres)])
+        ids = frame_ids(tracker, rng, centres, LOOKS[:len(centres)])
         assert ids == ([0] if hidden else [0, 1])
-    ids = frame_ids(tracker, [(300, 300), (400, 320), (900, 300)], np.concatenate([LOOKS, LOOKS[:1]]))
+    ids = frame_ids(tracker, rng, [(300, 300), (400, 320), (900, 300)], np.concatenate([LOOKS, LOOKS[:1]]))
     assert ids == [0, 1, 2]
 
 
 def test_a_person_who_left_long_ago_is_someone_new():
-    tracker = IdentityTracker(max_gap=10)
-    assert frame_ids(tracker, [(100, 100)], LOOKS[:1]) == [0]
+    tracker, rng = IdentityTracker(max_gap=10), np.random.default_rng(3)
+    assert frame_ids(tracker, rng, [(100, 100)], LOOKS[:1]) == [0]
     for _ in range(11):
-        assert frame_ids(tracker, [], []) == []
-    assert frame_ids(tracker, [(100, 100)], LOOKS[:1]) == [1]
+        assert frame_ids(tracker, rng, [], []) == []
+    assert frame_ids(tracker, rng, [(100, 100)], LOOKS[:1]) == [1]
 
 
 def test_state_carries_the_tracks_over():
     """A tracker restored from another's state continues exactly as the original does."""
-    original, restored = IdentityTracker(), IdentityTracker()
-    first = frame_ids(original, [(100, 300), (500, 310)], LOOKS)
+    original, restored, rng = IdentityTracker(), IdentityTracker(), np.random.default_rng(4)
+    first = frame_ids(original, rng, [(100, 300), (500, 310)], LOOKS)
     for t in range(1, 10):
-        frame_ids(original, [(100 + 4 * t, 300), (500 - 4 * t, 310)], LOOKS)
+        frame_ids(original, rng, [(100 + 4 * t, 300), (500 - 4 * t, 310)], LOOKS)
     restored.restore({k: v.copy() for k, v in original.state().items()})
-    state = RNG.bit_generator.state
-    a = frame_ids(original, [(140, 300), (460, 310), (800, 300)], np.concatenate([LOOKS, LOOKS[:1]]))
-    RNG.bit_generator.state = state
-    b = frame_ids(restored, [(140, 300), (460, 310), (800, 300)], np.concatenate([LOOKS, LOOKS[:1]]))
+    centres, looks = [(140, 300), (460, 310), (800, 300)], np.concatenate([LOOKS, LOOKS[:1]])
+    a = frame_ids(original, np.random.default_rng(5), centres, looks)
+    b = frame_ids(restored, np.random.default_rng(5), centres, looks)
     assert a == b == first + [2]
     for key, value in original.state().items():
         np.testing.assert_array_equal(value, restored.state()[key], err_msg=key)

@@ -2,6 +2,7 @@
 the bundled clip played as live (every frame, or in real time and slowed down on purpose), the stream parsed
 back, agreement with the offline run, and the command's exits (Ctrl-C, a camera that cannot be opened)."""
 
+import ipaddress
 import json
 import signal
 import socket
@@ -249,6 +250,7 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
             line = process.stderr.readline()
             assert line or process.poll() is None, process.stderr.read()
         port = int(line.rsplit(":", 1)[1].split("/")[0])
+        assert "http://127.0.0.1:" in line and _listening_on(port) == ["127.0.0.1"]  # this machine only
         time.sleep(2.0)
         status, kind, _ = _get(port, "/")
         assert status == 200 and _get(port, "/../etc/passwd")[0] == 404
@@ -264,6 +266,20 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
     assert process.returncode == 0, err
     assert out.startswith("interrupted: ") and "frames/s" in out
     assert read_motion(tmp_path / "motion.npz")["valid"].sum() >= 10
+
+
+def _listening_on(port: int) -> list[str]:
+    """The IPv4 and IPv6 addresses a TCP socket of this machine listens on at ``port`` (Linux's /proc/net)."""
+    addresses = []
+    for table in ("tcp", "tcp6"):
+        for row in Path(f"/proc/net/{table}").read_text().splitlines()[1:]:
+            local, state = row.split()[1], row.split()[3]
+            address, hex_port = local.split(":")
+            if state == "0A" and int(hex_port, 16) == port:  # LISTEN
+                raw = bytes.fromhex(address)
+                words = b"".join(raw[k:k + 4][::-1] for k in range(0, len(raw), 4))  # 32-bit words, little-endian
+                addresses.append(str(ipaddress.ip_address(words)))
+    return addresses
 
 
 def test_bad_inputs_are_named_before_anything_runs():

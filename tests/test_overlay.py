@@ -8,7 +8,16 @@ import numpy as np
 
 import smplx_jax
 from conftest import load
-from jaxmocap.overlay import OverlayWriter, Posed, body_up, mesh_over_frame, people_over_frame, person_colour, upright
+from jaxmocap.overlay import (
+    OverlayWriter,
+    Posed,
+    body_up,
+    mesh_over_frame,
+    people_over_frame,
+    person_colour,
+    shrunk,
+    upright,
+)
 from jaxmocap.poses import example_pose
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -62,6 +71,8 @@ def test_the_side_view_stands_the_body_up():
 
 
 def test_overlay_video_frames_and_size(default_model_dir, tmp_path):
+    """Every frame written, in order, as composed: the people (none, one, two) over the frame beside their side
+    view (up to the mp4's loss)."""
     model = load(default_model_dir)
     vertices, _ = _posed(model)
     cap = cv2.VideoCapture(str(CLIP))
@@ -70,12 +81,22 @@ def test_overlay_video_frames_and_size(default_model_dir, tmp_path):
         frames = [cap.read()[1] for _ in range(5)]
         people = [Posed(0, vertices, 700.0, np.array([540.0, 900.0])),
                   Posed(1, vertices + [0.3, 0.0, 0.0], 700.0, np.array([540.0, 900.0]))]
-        writer.write(*[(frame, people[:k % 3]) for k, frame in enumerate(frames)])
+        shown = [(frame, people[:k % 3]) for k, frame in enumerate(frames)]
+        writer.write(*shown)
+        composed = [writer.compose(*s).astype(float) for s in shown]
     video = cv2.VideoCapture(str(path))
     assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 5
-    ok, first = video.read()
-    assert ok and first.shape == (960, 1080, 3)
-    cv2.imwrite(str(tmp_path / "first.png"), first)
+    decoded = [video.read() for _ in range(6)]
+    assert all(ok for ok, _ in decoded[:5]) and not decoded[5][0]
+    loss = np.array([[np.abs(got.astype(float) - want).mean() for want in composed] for _, got in decoded[:5]])
+    print("mean absolute difference, decoded (rows) against composed frames (columns):\n", loss.round(2))
+    assert np.array_equal(loss.argmin(axis=1), np.arange(5)) and loss.diagonal().max() < 4.5  # measured 3.0
+    for k, (_, got) in enumerate(decoded[:5]):
+        assert got.shape == (960, 1080, 3)
+        front = (np.abs(got[:, :520].astype(int) - shrunk(frames[k], 0.5)[:, :520]).max(axis=2) > 40).mean()
+        side = (np.abs(got[:, 560:].astype(int) - 235).max(axis=2) > 40).mean()
+        print(f"frame {k}: share of pixels drawn over, front {front:.4f}, side {side:.4f}")  # measured: 0.067 a
+        assert (front > 0.045 * (k % 3) and side > 0.09) if k % 3 else (front < 0.001 and side == 0)  # person
 
 
 def test_people_are_drawn_in_their_colours_with_their_ids(default_model_dir):

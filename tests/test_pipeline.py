@@ -252,8 +252,9 @@ def test_body_mode_runs_no_hand_model_and_keeps_the_whole_modes_body(result, tmp
     wrists = [constants.LEFT_WRIST - 1, constants.RIGHT_WRIST - 1]
     orient = _degrees_between(body["global_orient"], whole["global_orient"])
     joints = np.delete(_degrees_between(body["body_pose"], whole["body_pose"]), wrists, axis=1)
-    assert orient.max() < 15.0 and joints.max() < 15.0 and joints.mean() < 2.0, (orient.max(), joints.max(),
-                                                                                 joints.mean())
+    print(f"global orientation within {orient.max():.2f} degrees, other joints {joints.max():.2f}, mean "
+          f"{joints.mean():.3f}")
+    assert orient.max() < 1.5 * 5.3 and joints.max() < 1.5 * 6.5 and joints.mean() < 1.5 * 0.3
 
 
 def test_interrupted_run_resumes_to_the_same_motion(result, tmp_path, monkeypatch):
@@ -298,35 +299,89 @@ def test_bad_input_is_one_line(tmp_path, capsys, monkeypatch, args, message):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("integration, hand_boxes, mode", [
-    ("copy-paste", "keypoints", "whole"), ("optimize", "keypoints", "whole"), ("copy-paste", "body", "whole"),
-    ("copy-paste", "keypoints", "body")])
-def test_frankmocap_path_with_converted_weights(tmp_path, monkeypatch, integration, hand_boxes, mode):
-    """Random FrankMocap-format checkpoints -> convert-frankmocap -> run --weights: a motion for every frame; with
-    ``--hand-boxes body`` the hand detector is skipped and the body's hands give boxes inside the image; with
-    ``--mode body`` the body regressor alone runs (FrankMocap's body demo), the hands flat."""
-    ref.write_checkpoints(tmp_path)
-    assert main(["convert-frankmocap", "--hand", str(tmp_path / "pose_shape_best.pth"), "--hand-mean",
-                 str(tmp_path / "mean_mano_params.pkl"), "--body", str(tmp_path / "body.pt"), "--out",
-                 str(tmp_path / "weights")]) == 0
+def _clip_frames(first, last):
+    from jaxmocap.frame_source import open_media
+
+    return [frame for _, frame in open_media(CLIP, first, last, 1)[1]]
+
+
+def _reference_body_rotmats(body_net, frame, box_xywh):
+    """The PyTorch reference HMR on FrankMocap's (transcribed) crop of ``box_xywh``: SMPL's 24 rotations."""
+    crop, _, _ = ref.body_crop(frame, box_xywh)
+    image = (crop[..., ::-1] / 255.0 - [0.485, 0.456, 0.406]) / [0.229, 0.224, 0.225]  # RGB, ImageNet's statistics
+    with torch.no_grad():
+        return body_net(torch.from_numpy(image.astype(np.float32)).permute(2, 0, 1)[None])[0][0].numpy()
+
+
+def _reference_hand(hand_net, frame, box_xywh, side):
+    """The PyTorch reference hand network on FrankMocap's crop of ``box_xywh`` (a left hand's flipped, predicted as
+    a right one and mirrored back): the absolute hand pose of that side."""
+    crop, _, _ = ref.hand_crop(frame, box_xywh)
+    crop = crop[:, ::-1] if side == "left" else crop
+    with torch.no_grad():
+        raw = hand_net(torch.from_numpy((crop / 255.0 - 0.5) / 0.5).float().permute(2, 0, 1)[None])[0].numpy()
+    relative = raw[6:51].reshape(15, 3) * ([1, -1, -1] if side == "left" else 1)
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    return relative + np.asarray(model.hand_mean[("left", "right").index(side)]).reshape(15, 3)
+
+
+def test_copy_paste_motion_is_the_regressors_output(frankmocap, frankmocap_run):
+    """``--weights --integration copy-paste`` (no smoothing): in each frame the body is the reference HMR's
+    prediction on FrankMocap's crop of the frame's body box, the right hand's fingers the reference hand network's
+    on its box (the boxes FrankMocap's pickles record)."""
+    _, hand_net, body_net = frankmocap
+    out = frankmocap_run(integration="copy-paste")
+    motion = read_motion(out / "motion.npz")
+    assert motion["valid"].all()
+    pickles = [pickle.loads(f.read_bytes()) for f in sorted((out / "mocap").iterdir())]
+    body_joints = [j for j in range(21) if j + 1 not in (constants.LEFT_WRIST, constants.RIGHT_WRIST)]
+    hands = 0
+    for t, (frame, d) in enumerate(zip(_clip_frames(20, 20 + FRAMES), pickles, strict=True)):
+        rotmats = _reference_body_rotmats(body_net, frame, d["body_bbox_list"][0])
+        ours = np.asarray(rotvec_to_rotmat(motion["body_pose"][t]))
+        assert np.abs(ours[body_joints] - rotmats[1:22][body_joints]).max() < 2e-3, t
+        for side in ("left", "right"):
+            box = d["hand_bbox_list"][0][f"{side}_hand"]
+            if box is not None:
+                hands += 1
+                np.testing.assert_allclose(motion[f"{side}_hand_pose"][t],
+                                           _reference_hand(hand_net, frame, box, side), atol=2e-3)
+    seen = [(motion["keypoints_2d"][:, hand, 2] > 0).any(axis=1) for hand in (slice(25, 46), slice(46, 67))]
+    assert hands == np.sum(seen) >= 1  # every hand the detector found
+
+
+def test_optimize_fits_the_keypoints_better_than_copy_paste(frankmocap_run):
+    """From the random regressors' copy-and-paste bodies (hundreds of pixels off), the fit comes to the keypoints."""
+    errors = {integration: read_motion(frankmocap_run(integration=integration) / "motion.npz")
+              for integration in ("copy-paste", "optimize")}
+    copy, fitted = (errors[k]["reprojection_error_px"] for k in ("copy-paste", "optimize"))
+    print("copy-paste", np.round(copy, 1), "optimize", np.round(fitted, 1))  # measured: at most 0.26 times
+    assert errors["optimize"]["valid"].all() and np.all(fitted < 0.4 * copy)
+
+
+@pytest.mark.parametrize("hand_boxes, mode", [("body", "whole"), ("keypoints", "body")])
+def test_frankmocap_path_without_the_hand_detector(frankmocap, frankmocap_run, monkeypatch, hand_boxes, mode):
+    """``--hand-boxes body``: the hand detector is skipped and the body's hands give boxes inside the image;
+    ``--mode body``: the body regressor alone runs (FrankMocap's body demo), the hands flat. The body is the
+    reference HMR's prediction either way."""
     if mode == "body":
         _no_hand_model(monkeypatch)
-    report = run(CLIP, tmp_path / "out", weights=tmp_path / "weights", integration=integration,
-                              start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False,
-                              hand_boxes=hand_boxes, frankmocap_pkl=True, mode=mode)
-    motion = read_motion(report.motion)
-    assert motion["valid"].all() and np.all(np.isfinite(motion["body_pose"]))
-    assert np.all(motion["camera_scale"] > 0)
+    out = frankmocap_run(integration="copy-paste", hand_boxes=hand_boxes, mode=mode)
+    motion = read_motion(out / "motion.npz")
+    assert motion["valid"].all() and not motion["keypoints_2d"][:, 25:, 2].any()  # no hand detection
+    pickles = [pickle.loads(f.read_bytes()) for f in sorted((out / "mocap").iterdir())]
+    frame = _clip_frames(20, 21)[0]
+    rotmats = _reference_body_rotmats(frankmocap[2], frame, pickles[0]["body_bbox_list"][0])
+    assert np.abs(np.asarray(rotvec_to_rotmat(motion["body_pose"][0]))[:19] - rotmats[1:20]).max() < 2e-3
     if mode == "body":
         assert not motion["left_hand_pose"].any() and not motion["right_hand_pose"].any()
-        assert not motion["keypoints_2d"][:, 25:, 2].any()
-    if hand_boxes == "body":
-        assert not motion["keypoints_2d"][:, 25:, 2].any()  # no hand detection
-        files = sorted((tmp_path / "out" / "mocap").iterdir())
-        boxes = [pickle.loads(f.read_bytes())["hand_bbox_list"][0] for f in files]
-        xywh = np.array([[b[side] for side in ("left_hand", "right_hand")] for b in boxes], np.float64)
-        assert xywh.shape == (FRAMES, 2, 4) and np.isfinite(xywh).all()
-        assert np.all(xywh[..., :2] >= 0) and np.all(xywh[..., :2] + xywh[..., 2:] <= (1080, 1920))
+        return
+    boxes = [p["hand_bbox_list"][0] for p in pickles]
+    xywh = np.array([[b[side] for side in ("left_hand", "right_hand")] for b in boxes], np.float64)
+    assert xywh.shape == (FRAMES, 2, 4) and np.isfinite(xywh).all()
+    assert np.all(xywh[..., :2] >= 0) and np.all(xywh[..., :2] + xywh[..., 2:] <= (1080, 1920))
+    own = _reference_hand(frankmocap[1], frame, boxes[0]["right_hand"], "right")
+    np.testing.assert_allclose(motion["right_hand_pose"][0], own, atol=2e-3)
 
 
 def test_body_hand_boxes_need_weights(tmp_path, capsys):

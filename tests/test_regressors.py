@@ -20,10 +20,9 @@ TOL = 1e-4
 
 
 @pytest.fixture(scope="module")
-def checkpoints(tmp_path_factory):
+def checkpoints(frankmocap):
     """FrankMocap-format files of random reference networks (hand .pth state_dict, {'model': ...} body .pt)."""
-    root = tmp_path_factory.mktemp("frankmocap")
-    return (root,) + ref.write_checkpoints(root)
+    return frankmocap
 
 
 def _convert(root, out, hand="pose_shape_best.pth", body="body.pt", mean="mean_mano_params.pkl"):
@@ -32,10 +31,8 @@ def _convert(root, out, hand="pose_shape_best.pth", body="body.pt", mean="mean_m
 
 
 @pytest.fixture(scope="module")
-def converted(checkpoints, tmp_path_factory):
-    out = tmp_path_factory.mktemp("weights")
-    assert _convert(checkpoints[0], out) == 0
-    return out
+def converted(checkpoints):
+    return checkpoints[0] / "weights"  # converted by conftest's `frankmocap`
 
 
 @pytest.fixture(scope="module")
