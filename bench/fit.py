@@ -1,5 +1,7 @@
-"""Optimization integration speed: frames/s of the 20-iteration fit (`jaxmocap.integrate.fit`, optimistix) over 256
-and 1024 frames and its final reprojection error, against a PyTorch baseline on the same objective, data, start and
+"""Optimization integration speed: frames/s of the fit (`jaxmocap.integrate.fit`, optimistix) over 256 and 1024
+frames and its final reprojection error, in two settings: the pipeline's (`jaxmocap.pipeline.stages.FIT_FROM_IK`,
+CG steps, 20 iterations) and the defaults (dense steps, at most 20, stopping once converged: the share converged
+is reported), against a PyTorch baseline on the same objective, data, start and
 threads: the ``smplx`` package + ``torch.optim.LBFGS`` (strong Wolfe line search, 20 iterations) and Adam (20 steps).
 (The comparison with the hand-written Levenberg-Marquardt that the optimistix fit replaced is in docs/BENCHMARKS.md,
 measured by this script at commit 990c816.)
@@ -143,8 +145,11 @@ def main():
     path = smplx_jax.default_model_path()
     model = smplx_jax.load_model(path)
     km = fitting.openpose_keypoint_model(model)
+    from jaxmocap.pipeline.stages import FIT_FROM_IK
+
     config = fitting.FitConfig()
     iterations = config.iterations
+    settings = {"pipeline": FIT_FROM_IK, "defaults": config}
 
     @jax.jit
     @jax.vmap
@@ -161,34 +166,39 @@ def main():
         def err(p, s, t, problem=problem):
             return float(np.median(reprojection_errors(model, p, s, t, problem.keypoints)))
 
-        row = _jax_row(model, problem, cam0, iterations, 3 if args.quick else 5, err)
+        row = {"frames": frames}
+        for name, setting in settings.items():
+            row.update({f"{name}_{key}": value for key, value in
+                        _jax_row(model, problem, cam0, setting, 3 if args.quick else 5, err).items()})
         if not (args.quick and frames > 256):
             for method in ("lbfgs", "adam"):
                 secs, params, s, t = torch_fit(path.parent.parent, problem, cam0, config, method, iterations, threads)
                 row[f"torch_{method}_fps"] = frames / secs
                 row[f"torch_{method}_error_px"] = err(params, s, t)
-                row[f"speedup_vs_{method}"] = secs / row["jax_seconds"]
+                row[f"speedup_vs_{method}"] = secs / row["pipeline_seconds"]
         rows.append(row)
         print(row, flush=True)
 
-    _print_table(rows, f"\nfit ({iterations} iterations), float32, {threads} threads, "
+    _print_table(rows, f"\nfit (at most {iterations} iterations), float32, {threads} threads, "
                  f"{platform.processor() or platform.machine()}, jax {jax.__version__}, torch {torch.__version__}; "
                  "median final reprojection error in px")
     args.out.mkdir(parents=True, exist_ok=True)
     result = dict(benchmark="fit", threads=threads, machine=platform.machine(), jax=jax.__version__,
-                  torch=torch.__version__, devices=[str(d) for d in jax.devices()], config=vars(config), rows=rows)
+                  torch=torch.__version__, devices=[str(d) for d in jax.devices()],
+                  settings={name: vars(setting) for name, setting in settings.items()}, rows=rows)
     (args.out / "fit.json").write_text(json.dumps(result, indent=2))
     print(f"wrote {args.out / 'fit.json'}")
 
 
-def _jax_row(model, problem, cam0, iterations: int, repeats: int, err) -> dict:
-    """Times of `fitting.fit` on ``problem`` from the camera ``cam0``: its first call (compilation included) and
-    the best of ``repeats``, with the start's and the fit's reprojection errors ``err(params, scale, trans)``."""
+def _jax_row(model, problem, cam0, config, repeats: int, err) -> dict:
+    """Times of `fitting.fit` with ``config`` on ``problem`` from the camera ``cam0``: its first call (compilation
+    included) and the best of ``repeats``, with the start's and the fit's reprojection errors ``err(params, scale,
+    trans)`` and the share of frames converged."""
     from jaxmocap.integrate import fitting
 
     def run():
         return jax.block_until_ready(fitting.fit(model, problem.keypoints, problem.init, cam0[:, 0], cam0[:, 1:],
-                                                 iterations=iterations))
+                                                 iterations=config.iterations, config=config))
 
     begin = time.perf_counter()
     run()
@@ -199,22 +209,25 @@ def _jax_row(model, problem, cam0, iterations: int, repeats: int, err) -> dict:
         result = run()
         times.append(time.perf_counter() - begin)
     seconds, frames = min(times), len(problem.keypoints)
-    return dict(frames=frames, iterations=iterations, jax_seconds=seconds, jax_fps=frames / seconds,
-                jax_first_call_seconds=first_call, start_error_px=err(problem.init, cam0[:, 0], cam0[:, 1:]),
-                jax_error_px=err(result.params, result.camera_scale, result.camera_trans))
+    return dict(seconds=seconds, fps=frames / seconds, first_call_seconds=first_call,
+                start_error_px=err(problem.init, cam0[:, 0], cam0[:, 1:]),
+                error_px=err(result.params, result.camera_scale, result.camera_trans),
+                converged=float(np.mean(result.converged)))
 
 
 def _print_table(rows: list[dict], title: str) -> None:
     print(title)
-    print(f"{'frames':>6} {'start px':>9} {'jax fps':>9} {'jax px':>7} {'LBFGS fps':>10} {'LBFGS px':>9} "
-          f"{'ratio':>7} {'Adam fps':>9} {'Adam px':>8} {'ratio':>7}")
+    print(f"{'frames':>6} {'start px':>9} {'pipe fps':>9} {'pipe px':>8} {'default fps':>12} {'default px':>11} "
+          f"{'converged':>10} {'LBFGS fps':>10} {'LBFGS px':>9} {'ratio':>7} {'Adam fps':>9} {'Adam px':>8} "
+          f"{'ratio':>7}")
     for r in rows:
         torch_cols = (f"{r['torch_lbfgs_fps']:>10.1f} {r['torch_lbfgs_error_px']:>9.2f} "
                       f"{r['speedup_vs_lbfgs']:>6.1f}x "
                       f"{r['torch_adam_fps']:>9.1f} {r['torch_adam_error_px']:>8.2f} {r['speedup_vs_adam']:>6.1f}x"
                       if "torch_lbfgs_fps" in r else f"{'-':>10} {'-':>9} {'-':>7} {'-':>9} {'-':>8} {'-':>7}")
-        print(f"{r['frames']:>6} {r['start_error_px']:>9.2f} {r['jax_fps']:>9.1f} {r['jax_error_px']:>7.2f} "
-              f"{torch_cols}")
+        print(f"{r['frames']:>6} {r['pipeline_start_error_px']:>9.2f} {r['pipeline_fps']:>9.1f} "
+              f"{r['pipeline_error_px']:>8.2f} {r['defaults_fps']:>12.1f} {r['defaults_error_px']:>11.2f} "
+              f"{100 * r['defaults_converged']:>9.0f}% {torch_cols}")
 
 
 if __name__ == "__main__":

@@ -7,10 +7,10 @@
     smoothed = smooth_params(result.params, result.valid)
 
 Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `fitting` (2D keypoints
--> pose, shape, camera), `least_squares` (one body's robust least squares on `optimistix.least_squares`),
-`descent` (its matrix-free Levenberg-Marquardt parts), `keypoints` (model keypoints with an analytic Jacobian),
-`mat3` (3x3 kernels), `eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`,
-`motion_arrays` (fits -> motion.npz arrays), `synthetic` (problems with known answers for tests and benchmarks).
+-> pose, shape, camera), `least_squares` (one body's robust least squares), `levenberg_marquardt` (its optimistix
+solver: dense or CG steps, a stopping rule), `keypoints` (model keypoints with an analytic Jacobian), `mat3`
+(3x3 kernels), `eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`, `motion_arrays`
+(fits -> motion.npz arrays), `synthetic` (problems with known answers for tests and benchmarks).
 """
 
 from jaxmocap.integrate.camera import project, weak_perspective_from_points

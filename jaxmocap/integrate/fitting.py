@@ -3,7 +3,7 @@
     result = fit_frame(model, keypoints, init)     # one frame: keypoints (67, 3) BODY_25, left, right hand; x, y, conf
     result = fit(model, keypoints, init=params)    # (T, 67, 3): vmap of the same fit, padded to fixed batch sizes
 
-Each frame is a robust least-squares problem solved by `optimistix.least_squares` (`least_squares.solve`):
+Each frame is a robust least-squares problem solved by `optimistix.least_squares` (`levenberg_marquardt.solve`):
 confidence-weighted Cauchy-robust reprojection of the 67 keypoints, a prior that keeps each joint near the initial
 pose (weaker for hands; fingers as hinges), shape L2 and the joint limits of elbows, knees and fingers. The camera
 is a pinhole of known focal length (``focal_length`` and ``principal_point``: the body's depth and perspective are
@@ -23,10 +23,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from jaxmocap.batching import map_in_buckets
-from jaxmocap.integrate import least_squares
+from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.camera import weak_perspective_from_points, weak_perspective_least_squares
 from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, keypoints_cm, params_of
 from jaxmocap.integrate.least_squares import prior_weights
@@ -44,6 +44,8 @@ FitConfig = least_squares.SolverConfig
 class FitResult(NamedTuple):
     """A fit: one frame from `fit_frame`, a leading axis T from `fit`. ``status``: 0 fitted, 1 too few
     keypoints, 2 numerical failure; frames with a non-zero status hold the initial parameters and camera.
+    ``converged``: the solve met its stopping rule (`least_squares.LevenbergMarquardt`) rather than its step cap
+    (``iterations``); implicit gradients are exact where it did.
     ``camera_scale``, ``camera_trans``: the weak-perspective projection of the fitted body (``transl`` included;
     docs/formats.md, "Coordinates and cameras"), for a pinhole camera the one closest to its projection.
     ``reprojection_error_px``: the fit's own (perspective for a pinhole camera)."""
@@ -54,7 +56,7 @@ class FitResult(NamedTuple):
     status: Int[Array, "*T"]
     reprojection_error_px: Float[Array, "*T"]  # mean pixel distance over keypoints with confidence > 0 (0 if none)
     initial_reprojection_error_px: Float[Array, "*T"]
-    accepted_steps: Int[Array, "*T"]
+    converged: Bool[Array, "*T"]
 
     @property
     def valid(self):
@@ -77,11 +79,11 @@ def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
 
 
 def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig, free=None,
-            fit_betas=None) -> FitResult:
+            fit_betas=None, adjoint=None) -> FitResult:
     """`fit_frame` of one frame from its full pose ``(55, 3)`` with its keypoint model ``km`` made beforehand
     (`openpose_keypoint_model`); ``camera`` (3,) or None (fitted to the start); ``lens`` (`lens_arrays`):
     (1 / focal length, principal point), 1 / focal length 0 for weak perspective; ``free`` (55,) 1 for the joints
-    fitted (default all), ``fit_betas`` 1 to fit the shape (default)."""
+    fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`."""
     dtype = pose.dtype
     inv_focal, center = lens
     finite = jnp.all(jnp.isfinite(keypoints), axis=-1)
@@ -96,7 +98,7 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
                                     jnp.ones(55, dtype) if free is None else free,
                                     jnp.ones((), dtype) if fit_betas is None else fit_betas, inv_focal, center)
     start = least_squares.Unknowns(pose, betas, jnp.concatenate([jnp.log(sref)[None], camera[1:]]))
-    solution = least_squares.solve(problem, start, config)
+    solution = levenberg_marquardt.solve(problem, start, config, adjoint)
     out = solution.value
 
     def reprojection_error(pixels):
@@ -114,8 +116,8 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
     weak_scale, weak_trans = weak_perspective_least_squares((points + transl[:, None])[:2].T, pixels.T, conf)
     scale, trans = jnp.where(pinhole, weak_scale, scale), jnp.where(pinhole, weak_trans, trans)
     enough = jnp.sum(seen) >= MIN_KEYPOINTS
-    solved = ((solution.result == optx.RESULTS.successful)
-              | (solution.result == optx.RESULTS.nonlinear_max_steps_reached))
+    converged = solution.result == optx.RESULTS.successful
+    solved = converged | (solution.result == optx.RESULTS.nonlinear_max_steps_reached)
     finite_out = jnp.all(jnp.array([jnp.all(jnp.isfinite(a)) for a in jax.tree.leaves(out)])) & jnp.isfinite(err)
     status = jnp.where(~enough, NO_KEYPOINTS, jnp.where(solved & finite_out, OK, FAILED)).astype(jnp.int32)
     keep = status == OK
@@ -124,7 +126,7 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
     params = params_of(pick(out.pose_rotvecs, pose), pick(out.betas, betas), km.body.num_expression)
     params = params.replace(transl=pick(transl, jnp.zeros_like(transl)))
     return FitResult(params, pick(scale, camera[0]), pick(trans, camera[1:]), status, pick(err, err0), err0,
-                     jnp.where(keep, solution.state.num_accepted_steps - 1, 0))
+                     keep & converged)
 
 
 def lens_arrays(focal_length, principal_point, dtype):
@@ -139,18 +141,24 @@ def lens_arrays(focal_length, principal_point, dtype):
 def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXParams, *,
               camera: Float[Array, "3"] | None = None, focal_length: float | None = None,
               principal_point: Float[Array, "2"] | None = None, iterations: int = 20,
-              config: FitConfig | None = None) -> FitResult:
+              config: FitConfig | None = None, adjoint: optx.AbstractAdjoint | None = None) -> FitResult:
     """Fit one frame's ``keypoints (67, 3)`` (pixels; confidence 0 or NaN/inf = missing) from ``init`` (one
     body; hand poses absolute; ``transl`` and ``expression`` ignored, the result has no expression).
     ``camera``: ``(scale, tx, ty)`` of the body's origin (``pixel = scale * x + t`` there) to start from, or None
     to fit it to the start's keypoints. ``focal_length`` (pixels) and ``principal_point`` (2,): a pinhole camera
-    (``transl`` of the result is the body's origin in its frame, metres); None: weak perspective. Pure and
-    differentiable (implicit differentiation; an unseen keypoint's gradient is zero)."""
+    (``transl`` of the result is the body's origin in its frame, metres); None: weak perspective. ``iterations``:
+    the cap on Levenberg-Marquardt steps; the solve stops earlier once converged (``FitResult.converged``).
+
+    Pure and differentiable. Gradients with respect to the keypoints, their confidences, the start and the
+    camera come from implicit differentiation (``adjoint`` None, `optimistix.ImplicitAdjoint`): the derivative of
+    the optimum, exact where ``converged`` (an unseen keypoint's gradient is zero). Where a fit was cut short by
+    its step cap, ``adjoint=optimistix.RecursiveCheckpointAdjoint()`` gives the derivative of what was computed,
+    the steps themselves."""
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
     km = openpose_keypoint_model(model)
     pose = init.full_pose()
     lens = lens_arrays(focal_length, principal_point, pose.dtype)
-    return fit_one(km, keypoints, pose, init.betas, camera, lens, config)
+    return fit_one(km, keypoints, pose, init.betas, camera, lens, config, adjoint=adjoint)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))

@@ -38,7 +38,8 @@ PALM = (0, 5, 9, 13, 17)  # wrist and the four knuckles (OpenPose hand order): t
 HAND_IK = IKConfig()  # the whole-body path's hand IK settings
 # The 2D fit from the IK start: the wrist (a body joint's prior) and the fingers' hinges stay near what the 3D
 # landmarks say; errors are robust beyond 2 cm (a hand is ~18 cm long).
-HAND_FIT = FitConfig(prior_body=0.02, prior_finger_hinge=0.05, prior_finger_range=0.2, robust_scale=0.02)
+HAND_FIT = FitConfig(prior_body=0.02, prior_finger_hinge=0.05, prior_finger_range=0.2, robust_scale=0.02,
+                     linear_solver="cg")
 
 
 class HandFit(NamedTuple):

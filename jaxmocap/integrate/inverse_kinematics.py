@@ -2,7 +2,7 @@
 
 Targets are metric 3D points in image-aligned axes (x right, y down, z away from the camera): mediapipe's
 BlazePose world landmarks (metres about the hips) and each hand's 21 world landmarks, or any 3D joints. The
-least-squares solver of the 2D fit (`least_squares.solve` with D = 3) fits joint rotations together with a free
+least-squares solver of the 2D fit (`levenberg_marquardt.solve` with D = 3) fits joint rotations together with a free
 scale and offset per target set, so
 the residuals are scale- and offset-free: BlazePose's hip centre is not SMPL-X's pelvis and its skeleton is not
 ours; what is fitted is the shape of the point set, i.e. bone directions. Hands are fitted after the body with
@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxmocap.integrate import least_squares
+from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.fitting import default_pose
 from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
 from smplx_jax import BodyModel, constants
@@ -54,7 +54,8 @@ RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
 # (`bench/accuracy.py`, docs/BENCHMARKS.md). The fingers likewise: without the hinge priors and the range limits
 # the hand landmarks were met by fingers turned by 1-3 radians off their flexion axis, which smoothing then bent
 # backwards; holding the whole thumb instead of its outer joints cost 1.3 mm of body PA-MPJPE on the bundled clip.
-IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, cg_iterations=30, prior_global=1e-4,
+IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, linear_solver="cg", cg_iterations=30,
+                             prior_global=1e-4,
                              prior_body=0.03, prior_hand=5e-4, prior_finger_hinge=0.05, prior_thumb=0.05,
                              prior_finger_range=0.2, robust_scale=0.2)
 
@@ -71,7 +72,7 @@ def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     problem = least_squares.Problem(km, targets, conf, theta, betas, prior, jnp.ones((), theta.dtype), free_joints,
                                     fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
     start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))
-    out = least_squares.solve(problem, start, config).value
+    out = levenberg_marquardt.solve(problem, start, config).value
     pose, betas_out = least_squares.pose_and_shape(out, problem)
     cam = jnp.concatenate([jnp.exp(out.camera[:1]), out.camera[1:]])
     ok = (jnp.sum(conf > 0) >= 3) & jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(cam))

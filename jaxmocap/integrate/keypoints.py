@@ -244,6 +244,14 @@ def jvp(km: KeypointModel, lin: Linearization, dpose: Float[Array, "55 3"], dbet
     return dx
 
 
+def pose_jacobian(km: KeypointModel, lin: Linearization) -> Float[Array, "3 K 55 3"]:
+    """``d keypoint / d pose_rotvecs`` as a dense array: `jvp` with ``exact=False`` of each axis-angle component,
+    ``reach[k, j] * (a_j e_b) x (x_k - p_j)``."""
+    arm = lin.x[:, :, None] - lin.p[:, None, :]  # (3, K, 55)
+    return jnp.stack([mat3.cross(jnp.broadcast_to(lin.a[:, b, None, :], arm.shape), arm) for b in range(3)],
+                     axis=-1) * km.reach[None, :, :, None]
+
+
 def vjp(km: KeypointModel, lin: Linearization, cotangent: Float[Array, "3 K"], *, exact: bool = True):
     """``J^T cotangent``: ``(dpose (55, 3), dbetas (B,))``, the transpose of `jvp`."""
     c = cotangent

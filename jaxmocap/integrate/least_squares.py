@@ -1,4 +1,5 @@
-"""One body's robust, regularised least squares, solved by `optimistix.least_squares` (`solve`).
+"""One body's robust, regularised least squares: its unknowns, residuals and priors (`levenberg_marquardt` solves
+it).
 
 Unknowns (`Unknowns`): the 55 joint axis-angles, ``betas`` and a camera ``(log scale, t_1..t_D)`` mapping model
 points ``x`` to data ``(scale * x[:D] + t - c) / (1 + scale * x[2] / f) + c`` (`project`). D = 2, the 2D fit:
@@ -15,30 +16,21 @@ Residuals (`residuals`; half their sum of squares is the cost):
   and one-sided joint limits ``weight * relu(sign * theta[j, axis] - slack)`` (`BEND_LIMITS`; ``prior_bend`` for
   elbows, knees and fingers bent backwards, ``prior_finger_range`` for the fingers' range).
 
-The solver (`GaussNewtonCG`) is optimistix's Gauss-Newton iteration with a Levenberg-Marquardt descent that never
-forms the Jacobian (`descent.DampedNewtonCG`) on the IRLS model of the cost (`IRLSModel`: the analytic Jacobian
-of `keypoints`, CG preconditioned by the 3x3 block of each joint, the shape diagonal and the camera block), and
-Marquardt's damping rule (`descent.DampingSearch`). Gradients through `solve` come from implicit
-differentiation (`optimistix.ImplicitAdjoint`) of the cost's optimality condition, through the exact JVP of
-`keypoints.keypoints_cm`.
+`levenberg_marquardt.solve` minimises the cost.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Float
 
-from jaxmocap.integrate import keypoints, mat3
-from jaxmocap.integrate.descent import DampedNewtonCG, DampingSearch
-from jaxmocap.integrate.keypoints import KeypointModel, Linearization
+from jaxmocap.integrate import keypoints
+from jaxmocap.integrate.keypoints import KeypointModel
 
 # One-sided joint limits (SMPLify-X's angle prior, and the fingers'): (joint, axis component, sign, slack):
 # sign * theta[joint, axis] > slack (radians) is beyond the limit. Elbows bend about y (left negative, right
@@ -70,8 +62,11 @@ def _bend(pose):
 class SolverConfig:
     """Static settings of one solve (hashable: a change recompiles)."""
 
-    iterations: int = 20  # trial steps (each evaluates the model once and solves one damped system)
-    cg_iterations: int = 8
+    iterations: int = 20  # the cap on steps (each evaluates the model once and solves one damped system)
+    linear_solver: str = "cholesky"  # or "cg": how each step's system is solved (`levenberg_marquardt`)
+    cg_iterations: int = 8  # with "cg"
+    joints: tuple[int, ...] | None = None  # the joints the solve moves (None: all 55); the others keep their start
+    tolerance: float | None = None  # converged below this predicted relative decrease (None: 1e-5, 1e-10 in float64)
     robust_scale: float = 0.1  # metres (times the camera scale for pixels)
     prior_global: float = 1e-3  # metres per radian
     prior_body: float = 0.02
@@ -81,7 +76,7 @@ class SolverConfig:
     prior_betas: float = 0.005  # metres per unit of beta
     prior_bend: float = 0.2
     prior_finger_range: float = 0.0  # the fingers' range of motion (`BEND_LIMITS`)
-    initial_damping: float = 1e-3  # Marquardt's mu at the start (relative to the diagonal of J^T J)
+    initial_damping: float = 1e-2  # Marquardt's mu at the start (relative to the diagonal of J^T J)
 
 
 class Unknowns(NamedTuple):
@@ -164,7 +159,7 @@ def project(x: Float[Array, "3 K"], camera: Float[Array, "C"], problem: Problem)
     return (jnp.exp(camera[0]) * x[:d] + camera[1:, None] - center) / depth + center, depth
 
 
-def _cauchy_u(r, problem: Problem, config: SolverConfig):
+def cauchy_u(r, problem: Problem, config: SolverConfig):
     """``u = |r|^2 / sigma^2`` per keypoint, ``sigma = robust_scale * scale_ref``."""
     return jnp.sum(r * r, 0) / (config.robust_scale * problem.scale_ref) ** 2
 
@@ -174,64 +169,12 @@ def residuals(y: Unknowns, problem: Problem, config: SolverConfig) -> Residuals:
     pose, betas = pose_and_shape(y, problem)
     r = project(keypoints.keypoints_cm(problem.km, pose, betas), y.camera, problem)[0] - problem.target.T
     sref = problem.scale_ref
-    return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(_cauchy_u(r, problem, config))),
+    return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(cauchy_u(r, problem, config))),
                      sref * problem.prior * (pose - problem.pose0), sref * config.prior_betas * betas,
                      sref * bend_weights(config) * jax.nn.relu(_bend(pose)))
 
 
-class Blocks(NamedTuple):
-    """A block diagonal of the model Hessian (the preconditioner of `descent.DampedNewtonCG`)."""
-
-    pose: Float[Array, "3 3 55"]
-    betas: Float[Array, "B"]
-    camera: Float[Array, "C C"]
-
-    def diagonal(self) -> Unknowns:
-        return Unknowns(jnp.stack([self.pose[i, i] for i in range(3)], 1), self.betas, jnp.diagonal(self.camera))
-
-    def damped_inverse(self, shift: Unknowns) -> "Blocks":
-        """The blocks of ``(blocks + diag(shift))^-1``."""
-        eye = jnp.eye(3, dtype=self.betas.dtype)[:, :, None]
-        camera = self.camera + jnp.diag(shift.camera)
-        camera = mat3.inverse(camera[:, :, None])[:, :, 0] if camera.shape[0] == 3 else jnp.linalg.inv(camera)
-        return Blocks(mat3.inverse(self.pose + shift.pose_rotvecs.T[:, None, :] * eye),
-                      1.0 / (self.betas + shift.betas), camera)
-
-    def mv(self, v: Unknowns) -> Unknowns:
-        return Unknowns(mat3.matvec(self.pose, v.pose_rotvecs.T).T, self.betas * v.betas, self.camera @ v.camera)
-
-
-def _data_blocks(lin: Linearization, scale, w, d: int, km: KeypointModel):
-    """Diagonal blocks of ``J^T diag(w) J`` of the data term of a similarity camera: 3x3 per joint (from moments of
-    the keypoints about it: one GEMM with ``reach ** 2``) and the shape diagonal."""
-    x, p = lin.x, lin.p
-    nk = w.shape[0]
-    xx = (x[:, None, :] * x[None, :, :]).reshape(9, nk)
-    mom = jnp.concatenate([w[None], w * x, w * xx]) @ km.reach2  # (13, 55)
-    m0, m1, m2 = mom[0], mom[1:4], mom[4:].reshape(3, 3, 55)
-    m1p = m1[:, None, :] * p[None, :, :]
-    q = m2 - m1p - jnp.swapaxes(m1p, 0, 1) + m0 * (p[:, None, :] * p[None, :, :])  # sum w v v^T, v = x - p
-    if d == 2:  # [v]x^T P^T P [v]x with P the projection to x, y
-        z = jnp.zeros_like(m0)
-        b_omega = jnp.stack([jnp.stack([q[2, 2], z, -q[0, 2]]), jnp.stack([z, q[2, 2], -q[1, 2]]),
-                             jnp.stack([-q[0, 2], -q[1, 2], q[0, 0] + q[1, 1]])])
-    else:
-        b_omega = (q[0, 0] + q[1, 1] + q[2, 2]) * jnp.eye(3, dtype=x.dtype)[:, :, None] - q
-    b_pose = (scale * scale) * mat3.matmul(jnp.swapaxes(lin.a, 0, 1), mat3.matmul(b_omega, lin.a))
-    jb = lin.jb[:, : d * nk]
-    b_betas = (scale * scale) * ((jb * jb) @ jnp.tile(w, d))
-    return b_pose, b_betas
-
-
-def _camera_block(w, dlogscale, depth):
-    """``J^T diag(w) J`` of the camera (log scale, translation): ``dlogscale (D, K)`` the log scale's column."""
-    d = dlogscale.shape[0]
-    cross = jnp.sum(w * dlogscale / depth, 1)
-    return jnp.concatenate([jnp.concatenate([jnp.sum(w * dlogscale * dlogscale)[None], cross])[None],
-                            jnp.concatenate([cross[:, None], jnp.sum(w / depth**2) * jnp.eye(d, dtype=w.dtype)], 1)])
-
-
-def _prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Unknowns]:
+def prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Unknowns]:
     """The gradient and the (Gauss-Newton, diagonal) Hessian of the priors' half sum of squares."""
     sref = problem.scale_ref
     pose_weight = (sref * problem.prior) ** 2
@@ -242,86 +185,3 @@ def _prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig
     betas_weight = jnp.full_like(betas, (sref * config.prior_betas) ** 2)
     return (Unknowns(gradient, betas_weight * betas, jnp.zeros_like(camera)),
             Unknowns(hessian, betas_weight, jnp.zeros_like(camera)))
-
-
-class IRLSModel(eqx.Module):
-    """The descent's local model of the cost at ``y`` (`descent.DampedNewtonCG`): the keypoint errors weighted
-    by Cauchy's ``rho' = conf / (1 + u)`` held at ``y`` (IRLS), with the analytic Jacobian of the keypoints
-    (one `keypoints.linearize`) and of the projection, and the priors. Returns the cost's exact gradient,
-    ``v -> H v`` (IRLS Gauss-Newton, with the millimetre terms of the keypoint Jacobian left out: cheaper, still
-    positive semi-definite) and a block diagonal of ``H`` (the preconditioner; without the projection's depth
-    terms), all masked to the free unknowns."""
-
-    problem: Problem
-    config: SolverConfig = eqx.field(static=True)
-
-    def __call__(self, y: Unknowns):
-        problem, config = jax.lax.stop_gradient(self.problem), self.config
-        km, d = problem.km, problem.target.shape[1]
-        pose, betas = pose_and_shape(y, problem)
-        lin = keypoints.linearize(km, pose, betas)
-        scale = jnp.exp(y.camera[0])
-        points, depth = project(lin.x, y.camera, problem)
-        r = points - problem.target.T
-        w = problem.conf / (1.0 + _cauchy_u(r, problem, config))
-        gain = scale / depth  # d points / d x[:D]
-        slope = problem.inv_focal * (points - problem.center[:, None])  # d points / d x[2] = -gain * slope
-
-        def image(dx):  # (3, K) -> (D, K)
-            return gain * (dx[:d] - slope * dx[2])
-
-        dlogscale = image(lin.x)
-        mask = Unknowns(jnp.broadcast_to(problem.free[:, None], pose.shape),
-                        jnp.broadcast_to(problem.fit_betas, betas.shape), jnp.ones_like(y.camera))
-        prior_gradient, prior_hessian = _prior_quadratic(pose, betas, y.camera, problem, config)
-
-        def jv(v: Unknowns, exact: bool):  # (D, K)
-            dx = keypoints.jvp(km, lin, v.pose_rotvecs * mask.pose_rotvecs, v.betas * mask.betas, exact=exact)
-            return image(dx) + v.camera[0] * dlogscale + v.camera[1:, None] / depth
-
-        def jtu(u, exact: bool) -> Unknowns:
-            gu = gain * u
-            padded = jnp.concatenate([gu, jnp.zeros((3 - d,) + u.shape[1:], u.dtype)])
-            padded = padded.at[2].add(-jnp.sum(gu * slope, 0))
-            dpose, dbetas = keypoints.vjp(km, lin, padded, exact=exact)
-            return Unknowns(dpose, dbetas, jnp.concatenate([jnp.sum(u * dlogscale)[None], jnp.sum(u / depth, 1)]))
-
-        def hessian(v: Unknowns) -> Unknowns:
-            return jax.tree.map(lambda a, h, vi, m: (a + h * vi) * m, jtu(w * jv(v, False), False), prior_hessian,
-                                v, mask)
-
-        gradient = jax.tree.map(lambda a, g, m: (a + g) * m, jtu(w * r, True), prior_gradient, mask)
-        b_pose, b_betas = _data_blocks(lin, scale, w / depth**2, d, km)
-        b_camera = _camera_block(w, dlogscale, depth)
-        eye = jnp.eye(3, dtype=r.dtype)[:, :, None]
-        blocks = Blocks(jnp.where(problem.free > 0, b_pose + prior_hessian.pose_rotvecs.T[:, None, :] * eye, eye),
-                        jnp.where(problem.fit_betas > 0, b_betas + prior_hessian.betas, 1.0), b_camera)
-        return gradient, hessian, blocks
-
-
-def _quiet(**_):
-    pass
-
-
-class GaussNewtonCG(optx.AbstractGaussNewton):
-    """Levenberg-Marquardt on a local model with a matrix-free descent (`descent.DampedNewtonCG`)."""
-
-    rtol: float
-    atol: float
-    norm: Callable
-    descent: DampedNewtonCG
-    search: DampingSearch
-    verbose: Callable
-
-
-def solve(problem: Problem, y0: Unknowns, config: SolverConfig) -> optx.Solution:
-    """Minimise the cost of `residuals` from ``y0`` (``config.iterations`` trial steps, fewer once steps and
-    cost stall at rounding level; ``result`` is successful or ``nonlinear_max_steps_reached``, both fine; no
-    exception under `jax.vmap`)."""
-    tolerance = 16 * float(jnp.finfo(y0.pose_rotvecs.dtype).eps)
-    solver = GaussNewtonCG(rtol=tolerance, atol=tolerance, norm=optx.max_norm,
-                           descent=DampedNewtonCG(IRLSModel(problem, config), config.initial_damping,
-                                                  config.cg_iterations),
-                           search=DampingSearch(), verbose=_quiet)
-    return optx.least_squares(jax.tree_util.Partial(residuals, config=config), solver, y0, problem,
-                              max_steps=config.iterations + 1, throw=False)

@@ -8,7 +8,7 @@ from jaxtyping import Array, Float
 from smplx_jax.rotations import skew_polynomial
 
 
-def cross(a: Float[Array, "3 N"], b: Float[Array, "3 N"]) -> Float[Array, "3 N"]:
+def cross(a: Float[Array, "3 *N"], b: Float[Array, "3 *N"]) -> Float[Array, "3 *N"]:
     return jnp.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 

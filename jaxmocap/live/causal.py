@@ -41,7 +41,6 @@ class LiveSettings:
 
     hands: bool = True
     ik_iterations: int = 5
-    ik_cg_iterations: int = 15
     fit_iterations: int = 5
     rotations: OneEuro = OneEuro(min_cutoff=1.0, beta=10.0)
     translation: OneEuro = OneEuro(min_cutoff=1.0, beta=20.0)
@@ -100,7 +99,7 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
     presence (2,), OpenPose keypoints (67, 3)); ``fresh``: the filters start here; ``dt``: seconds since the
     person's last frame; ``lens``: `lens_arrays`."""
     world, hands_world, hands_conf, keypoints = obs
-    ik_config = IKConfig(iterations=settings.ik_iterations, cg_iterations=settings.ik_cg_iterations)
+    ik_config = IKConfig(iterations=settings.ik_iterations)
     targets, conf = blazepose_targets(world)
     theta, betas, _, _ = ik_one(models.body, targets, conf, state.theta, state.betas, _MASKS[0], 0.0, ik_config)
     for side, km in enumerate((models.left, models.right) if settings.hands else ()):

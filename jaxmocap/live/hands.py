@@ -38,7 +38,6 @@ class HandSettings:
     ``warm_up`` steps on its first frame."""
 
     ik_iterations: int = 5
-    ik_cg_iterations: int = 15
     fit_iterations: int = 5
     rotations: OneEuro = OneEuro(min_cutoff=1.0, beta=10.0)
     camera: OneEuro = OneEuro(min_cutoff=1.0, beta=0.5)
@@ -61,7 +60,7 @@ def hand_step(km: KeypointModel, left: Bool[Array, ""], world: Float[Array, "21 
     """One hand's frame (``left``: its side; ``km`` that side's `hand_keypoint_model`): IK from the closed-form
     start when ``fresh``, else from ``state``'s pose, then the fit and the filters (which start here when
     ``fresh``); ``dt``: seconds since the hand's last frame."""
-    ik_config = IKConfig(iterations=settings.ik_iterations, cg_iterations=settings.ik_cg_iterations)
+    ik_config = IKConfig(iterations=settings.ik_iterations)
     start = jnp.where(fresh, palm_start(km, left, world), state.pose)
     pose = hand_ik_one(km, left, world, jnp.ones(21, world.dtype), ik_config, start)
     fitted = hand_fit_from(km, left, keypoints, pose, dataclasses.replace(HAND_FIT,

@@ -54,7 +54,7 @@ def initial_bodies(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.S
 # The fit from the IK start: the start already holds BlazePose's 3D (depth, twists) that the 2D keypoints do not see,
 # so the prior keeps the fit near it (0.1 m/rad; the generic fit's 0.02 lets depth drift: 3D error up on real
 # footage, docs/BENCHMARKS.md).
-FIT_FROM_IK = FitConfig(prior_body=0.1, prior_finger_hinge=0.05, prior_finger_range=0.2)
+FIT_FROM_IK = FitConfig(prior_body=0.1, prior_finger_hinge=0.05, prior_finger_range=0.2, linear_solver="cg")
 
 
 def lens_of(image_size: tuple[int, int], focal_length: float | None = None) -> Lens:

@@ -1,0 +1,276 @@
+"""The solver of `least_squares`: Levenberg-Marquardt on the IRLS model of the cost, an optimistix solver.
+
+Each step takes the model of the cost at the current point (`local_model`: the keypoint errors weighted by
+Cauchy's ``rho' = conf / (1 + u)``, the analytic Jacobian of `keypoints` and of the projection, the priors),
+solves ``(H + mu diag(H)) delta = -g`` and keeps the step if the cost falls; ``mu`` follows Nielsen's rule on the
+ratio of the actual to the predicted decrease. ``SolverConfig.linear_solver`` says how the system is solved:
+
+* ``"cholesky"`` (default): exactly, by a dense Cholesky factorisation over the unknowns the solve moves (some
+  180: the joints of ``SolverConfig.joints``, the shape, the camera). Converges: the solve stops once a step at
+  damping at most 1 predicts a relative decrease of the cost below ``SolverConfig.tolerance``, and reports it.
+* ``"cg"``: ``cg_iterations`` steps of conjugate gradients, matrix-free, preconditioned by the 3x3 block of each
+  joint, the shape's diagonal and the camera's block (`Blocks`): several times faster per step, inexact, for a
+  fixed number of steps (the pipeline's and live capture's fits; the same stopping test, rarely met).
+
+Both leave out the millimetre terms of blended skinning and pose blend shapes from ``H`` (cheaper, still
+positive semi-definite); the gradient ``g`` is the cost's exact one. Gradients through `solve` come from
+implicit differentiation (`optimistix.ImplicitAdjoint`, default) of the cost's optimality condition, exact where
+the solve converged; ``adjoint=optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps taken.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Bool, Float
+
+from jaxmocap.integrate import keypoints, mat3
+from jaxmocap.integrate.keypoints import KeypointModel, Linearization
+from jaxmocap.integrate.least_squares import (
+    Problem,
+    SolverConfig,
+    Unknowns,
+    cauchy_u,
+    pose_and_shape,
+    prior_quadratic,
+    project,
+    residuals,
+)
+
+MAX_DAMPING = 1e10  # beyond it steps are nothing; the damping stays finite
+
+
+def _dot(a: Unknowns, b: Unknowns):
+    return sum(jnp.sum(x * y) for x, y in zip(a, b))
+
+
+def solved_joints(config: SolverConfig) -> np.ndarray:
+    """The joints whose rotations the solve moves (`SolverConfig.joints`; all 55 by default), in order."""
+    return np.arange(55) if config.joints is None else np.asarray(config.joints, np.int64)
+
+
+class Blocks(NamedTuple):
+    """A block diagonal of ``H``: the preconditioner of the ``"cg"`` solver."""
+
+    pose: Float[Array, "3 3 55"]
+    betas: Float[Array, "B"]
+    camera: Float[Array, "C C"]
+
+    def diagonal(self) -> Unknowns:
+        return Unknowns(jnp.stack([self.pose[i, i] for i in range(3)], 1), self.betas, jnp.diagonal(self.camera))
+
+    def damped_inverse(self, shift: Unknowns) -> Blocks:
+        """The blocks of ``(blocks + diag(shift))^-1``."""
+        eye = jnp.eye(3, dtype=self.betas.dtype)[:, :, None]
+        camera = self.camera + jnp.diag(shift.camera)
+        camera = mat3.inverse(camera[:, :, None])[:, :, 0] if camera.shape[0] == 3 else jnp.linalg.inv(camera)
+        return Blocks(mat3.inverse(self.pose + shift.pose_rotvecs.T[:, None, :] * eye),
+                      1.0 / (self.betas + shift.betas), camera)
+
+    def mv(self, v: Unknowns) -> Unknowns:
+        return Unknowns(mat3.matvec(self.pose, v.pose_rotvecs.T).T, self.betas * v.betas, self.camera @ v.camera)
+
+
+def _data_blocks(lin: Linearization, scale, w, d: int, km: KeypointModel):
+    """Diagonal blocks of ``J^T diag(w) J`` of the data term of a similarity camera: 3x3 per joint (from moments of
+    the keypoints about it: one GEMM with ``reach ** 2``) and the shape diagonal."""
+    x, p = lin.x, lin.p
+    nk = w.shape[0]
+    xx = (x[:, None, :] * x[None, :, :]).reshape(9, nk)
+    mom = jnp.concatenate([w[None], w * x, w * xx]) @ km.reach2  # (13, 55)
+    m0, m1, m2 = mom[0], mom[1:4], mom[4:].reshape(3, 3, 55)
+    m1p = m1[:, None, :] * p[None, :, :]
+    q = m2 - m1p - jnp.swapaxes(m1p, 0, 1) + m0 * (p[:, None, :] * p[None, :, :])  # sum w v v^T, v = x - p
+    if d == 2:  # [v]x^T P^T P [v]x with P the projection to x, y
+        z = jnp.zeros_like(m0)
+        b_omega = jnp.stack([jnp.stack([q[2, 2], z, -q[0, 2]]), jnp.stack([z, q[2, 2], -q[1, 2]]),
+                             jnp.stack([-q[0, 2], -q[1, 2], q[0, 0] + q[1, 1]])])
+    else:
+        b_omega = (q[0, 0] + q[1, 1] + q[2, 2]) * jnp.eye(3, dtype=x.dtype)[:, :, None] - q
+    b_pose = (scale * scale) * mat3.matmul(jnp.swapaxes(lin.a, 0, 1), mat3.matmul(b_omega, lin.a))
+    jb = lin.jb[:, : d * nk]
+    b_betas = (scale * scale) * ((jb * jb) @ jnp.tile(w, d))
+    return b_pose, b_betas
+
+
+def _camera_block(w, dlogscale, depth):
+    """``J^T diag(w) J`` of the camera (log scale, translation): ``dlogscale (D, K)`` the log scale's column."""
+    d = dlogscale.shape[0]
+    cross = jnp.sum(w * dlogscale / depth, 1)
+    return jnp.concatenate([jnp.concatenate([jnp.sum(w * dlogscale * dlogscale)[None], cross])[None],
+                            jnp.concatenate([cross[:, None], jnp.sum(w / depth**2) * jnp.eye(d, dtype=w.dtype)], 1)])
+
+
+class LocalModel(NamedTuple):
+    """The IRLS model of the cost at one point, masked to the unknowns the solve moves: the exact ``gradient``,
+    ``v -> H v`` and ``H``'s diagonal; ``dense`` is ``H`` over `_flat` (``"cholesky"``), ``blocks`` its block
+    diagonal (``"cg"``)."""
+
+    gradient: Unknowns
+    hessian: Callable[[Unknowns], Unknowns]
+    diagonal: Unknowns
+    dense: Float[Array, "n n"] | None
+    blocks: Blocks | None
+
+
+def local_model(y: Unknowns, problem: Problem, config: SolverConfig) -> LocalModel:
+    d = problem.target.shape[1]
+    km, joints = problem.km, solved_joints(config)
+    pose, betas = pose_and_shape(y, problem)
+    lin = keypoints.linearize(km, pose, betas)
+    scale = jnp.exp(y.camera[0])
+    points, depth = project(lin.x, y.camera, problem)
+    r = points - problem.target.T
+    w = problem.conf / (1.0 + cauchy_u(r, problem, config))
+    gain = scale / depth  # d points / d x[:D]
+    slope = problem.inv_focal * (points - problem.center[:, None])  # d points / d x[2] = -gain * slope
+
+    def image(dx):  # (3, K, ...) -> (D, K, ...)
+        extra = (None,) * (dx.ndim - 2)
+        return gain[(...,) + extra] * (dx[:d] - slope[(...,) + extra] * dx[2][None])
+
+    dlogscale = image(lin.x)
+    moving = np.zeros(55, np.float32)
+    moving[joints] = 1.0
+    mask = Unknowns(jnp.broadcast_to((problem.free * moving)[:, None], pose.shape),
+                    jnp.broadcast_to(problem.fit_betas, betas.shape), jnp.ones_like(y.camera))
+    prior_gradient, prior_hessian = prior_quadratic(pose, betas, y.camera, problem, config)
+
+    def jv(v: Unknowns):  # (D, K)
+        dx = keypoints.jvp(km, lin, v.pose_rotvecs * mask.pose_rotvecs, v.betas * mask.betas, exact=False)
+        return image(dx) + v.camera[0] * dlogscale + v.camera[1:, None] / depth
+
+    def jtu(u, exact: bool) -> Unknowns:
+        gu = gain * u
+        padded = jnp.concatenate([gu, jnp.zeros((3 - d,) + u.shape[1:], u.dtype)])
+        padded = padded.at[2].add(-jnp.sum(gu * slope, 0))
+        dpose, dbetas = keypoints.vjp(km, lin, padded, exact=exact)
+        return Unknowns(dpose, dbetas, jnp.concatenate([jnp.sum(u * dlogscale)[None], jnp.sum(u / depth, 1)]))
+
+    def masked(tree):
+        return jax.tree.map(jnp.multiply, tree, mask)
+
+    def hessian(v: Unknowns) -> Unknowns:
+        return masked(jax.tree.map(lambda a, h, vi: a + h * vi, jtu(w * jv(v), False), prior_hessian, v))
+
+    gradient = masked(jax.tree.map(jnp.add, jtu(w * r, True), prior_gradient))
+    if config.linear_solver == "cg":
+        b_pose, b_betas = _data_blocks(lin, scale, w / depth**2, d, km)
+        eye = jnp.eye(3, dtype=r.dtype)[:, :, None]
+        blocks = Blocks(jnp.where(mask.pose_rotvecs[:, 0] > 0, b_pose + prior_hessian.pose_rotvecs.T[:, None] * eye,
+                                  eye), jnp.where(mask.betas > 0, b_betas + prior_hessian.betas, 1.0),
+                        _camera_block(w, dlogscale, depth))
+        return LocalModel(gradient, hessian, blocks.diagonal(), None, blocks)
+    nk = r.shape[1]
+    shape = jnp.concatenate([(keypoints.pose_jacobian(km, lin)[:, :, joints]
+                              * mask.pose_rotvecs[joints][None, None]).reshape(3, nk, -1),
+                             lin.jb.reshape(-1, 3, nk).transpose(1, 2, 0) * problem.fit_betas], axis=-1)
+    jacobian = jnp.concatenate([image(shape), dlogscale[..., None], jnp.broadcast_to(
+        jnp.eye(d, dtype=r.dtype)[:, None] / depth[None, :, None], (d, nk, d))], axis=-1)  # (D, K, n)
+    fixed = 1.0 - _flat(mask, config)
+    dense = (jnp.einsum("dkn,k,dkm->nm", jacobian, w, jacobian) + jnp.diag(_flat(prior_hessian, config))) \
+        * (1.0 - fixed)[:, None] * (1.0 - fixed)[None, :] + jnp.diag(fixed)
+    diagonal = _unflat(jnp.diag(dense) * (1.0 - fixed), y, config)
+    return LocalModel(gradient, hessian, diagonal, dense, None)
+
+
+def _flat(y: Unknowns, config: SolverConfig) -> Float[Array, "n"]:
+    """The unknowns the dense system holds: the rotations of `solved_joints`, the shape, the camera."""
+    return jnp.concatenate([y.pose_rotvecs[solved_joints(config)].reshape(-1), y.betas, y.camera])
+
+
+def _unflat(flat: Float[Array, "n"], like: Unknowns, config: SolverConfig) -> Unknowns:
+    """`_flat`'s inverse, zero for the joints the solve does not move."""
+    joints = solved_joints(config)
+    m, b = 3 * len(joints), like.betas.shape[0]
+    return Unknowns(jnp.zeros_like(like.pose_rotvecs).at[joints].set(flat[:m].reshape(-1, 3)), flat[m:m + b],
+                    flat[m + b:])
+
+
+def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig) -> Unknowns:
+    """The damped step ``-(H + damping diag(H))^-1 g``."""
+    if model.dense is not None:
+        diagonal = jnp.diag(model.dense)
+        factor = jnp.linalg.cholesky(model.dense + jnp.diag(damping * jnp.maximum(diagonal, 1e-30 * diagonal.max())))
+        return _unflat(-jax.scipy.linalg.cho_solve((factor, True), _flat(model.gradient, config)), like, config)
+    shift = jax.tree.map(lambda d: damping * d + 1e-9 * (1.0 + d), model.diagonal)
+    structure = jax.eval_shape(lambda: like)
+    psd = lx.positive_semidefinite_tag
+    operator = lx.FunctionLinearOperator(
+        lambda v: jax.tree.map(lambda hv, s, vi: hv + s * vi, model.hessian(v), shift, v), structure, psd)
+    preconditioner = lx.FunctionLinearOperator(model.blocks.damped_inverse(shift).mv, structure, psd)
+    solver = lx.CG(rtol=0.0, atol=0.0, max_steps=config.cg_iterations, stabilise_every=None)
+    return lx.linear_solve(operator, jax.tree.map(jnp.negative, model.gradient), solver,
+                           options=dict(preconditioner=preconditioner), throw=False).value
+
+
+def cost_of(y: Unknowns, problem: Problem, config: SolverConfig):
+    """The cost at ``y``: half the sum of squares of `residuals`."""
+    return 0.5 * sum(jnp.sum(part * part) for part in residuals(y, problem, config))
+
+
+class _State(eqx.Module):
+    cost: Float[Array, ""]  # at the current point
+    damping: Float[Array, ""]  # Marquardt's mu
+    growth: Float[Array, ""]  # Nielsen's factor for mu after a rejected step
+    converged: Bool[Array, ""]
+
+
+class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
+    """Levenberg-Marquardt on `local_model` (the problem is the solve's ``args``); converged when a step at
+    damping at most 1 predicts a relative decrease of the cost of at most ``rtol``."""
+
+    config: SolverConfig = eqx.field(static=True)
+    rtol: float
+    atol: float = 0.0  # unused: the test is relative
+    norm: Callable = optx.max_norm  # unused
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        cost = cost_of(y, args, self.config)
+        one = jnp.ones((), cost.dtype)
+        return _State(cost, self.config.initial_damping * one, 2.0 * one, jnp.array(False))
+
+    def step(self, fn, y, args, options, state, tags):
+        model = local_model(y, args, self.config)
+        delta = _step(model, state.damping, y, self.config)
+        predicted = -(_dot(model.gradient, delta) + 0.5 * _dot(delta, model.hessian(delta)))
+        trial = jax.tree.map(jnp.add, y, delta)
+        cost = cost_of(trial, args, self.config)
+        accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
+        ratio = (state.cost - cost) / predicted
+        converged = (predicted <= self.rtol * state.cost) & (state.damping <= 1.0)
+        damping = jnp.where(accept, state.damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3),
+                            state.damping * state.growth)
+        new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING),
+                     jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged)
+        return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
+
+    def terminate(self, fn, y, args, options, state, tags):
+        return state.converged, optx.RESULTS.successful
+
+    def postprocess(self, fn, y, aux, args, options, state, tags, result):
+        return y, aux, {}
+
+
+def default_tolerance(dtype) -> float:
+    """`SolverConfig.tolerance` where None: a predicted relative decrease of 1e-5 in float32 (what its rounding
+    of the cost still resolves), 1e-10 in float64."""
+    return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
+
+
+def solve(problem: Problem, y0: Unknowns, config: SolverConfig, adjoint: optx.AbstractAdjoint | None = None
+          ) -> optx.Solution:
+    """Minimise the cost of `residuals` from ``y0`` (`LevenbergMarquardt`, at most ``config.iterations`` steps;
+    ``result`` successful when converged, ``nonlinear_max_steps_reached`` otherwise; no exception under
+    `jax.vmap`). ``adjoint``: how gradients go through the solve (default `optimistix.ImplicitAdjoint`)."""
+    tolerance = config.tolerance or default_tolerance(y0.pose_rotvecs.dtype)
+    return optx.least_squares(jax.tree_util.Partial(residuals, config=config), LevenbergMarquardt(config, tolerance),
+                              y0, problem, max_steps=config.iterations, throw=False,
+                              adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
