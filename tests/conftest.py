@@ -115,3 +115,24 @@ def frankmocap_run(frankmocap, tmp_path_factory):
         return done[key]
 
     return weights_run
+
+
+# upper arms, forearms, thighs, shins
+LIMB_BONES = ((16, 18), (17, 19), (18, 20), (19, 21), (1, 4), (2, 5), (4, 7), (5, 8))
+
+
+def assert_one_body(motion: dict, frames=slice(None)) -> None:
+    """One shape for the person over ``frames`` of ``motion``'s valid ones: ``betas`` the same row (per-component
+    std <= 0.01) and the limb bones' lengths within 0.5% of their median."""
+    import jax
+
+    from jaxmocap.motion import motion_params
+
+    model = smplx_jax.load_model(default_model_path())
+    valid = np.flatnonzero(motion["valid"])[frames]
+    assert len(valid) >= 2 and motion["betas"][valid].std(0).max() <= 0.01, motion["betas"][valid].std(0)
+    joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(
+        model, motion_params(motion, model.num_expression, valid)))
+    for a, b in LIMB_BONES:
+        length = np.linalg.norm(joints[:, a] - joints[:, b], axis=-1)
+        assert np.ptp(length) <= 0.005 * np.median(length), (a, b, length.min(), length.max())

@@ -178,3 +178,16 @@ def test_unconverged_fits_are_flagged_and_differentiated_step_by_step(x64, defau
         h = 1e-3 if where[1] < 2 else 1e-5
         numeric = float((wrist(kp.at[where].add(h))[0] - wrist(kp.at[where].add(-h))[0]) / (2 * h))
         assert abs(float(grad[where]) - numeric) <= 1e-3 * abs(numeric) and abs(numeric) > 1e-7, (where, numeric)
+
+
+def test_readmes_fitting_in_the_loop_lowers_its_loss(capsys):
+    """README's example, run as written (float32): the loss after its ten Adam steps is at least 5% lower."""
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).parent.parent / "README.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "Fitting in the loop" in b)
+    with jax.enable_x64(False):  # as a user runs it (this module's other tests run in float64)
+        exec(compile(block, "README.md", "exec"), {})
+    losses = [float(v) for v in re.findall(r"loss ([0-9.e-]+)", capsys.readouterr().out)]
+    assert len(losses) == 10 and losses[-1] <= 0.95 * losses[0], losses

@@ -21,6 +21,7 @@ import pytest
 
 import smplx_jax
 from bench import live as live_bench
+from conftest import assert_one_body
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import MediaError
 from jaxmocap.live import LiveConfig, live, params_from_message
@@ -200,6 +201,15 @@ def test_every_frame_is_solved_when_played_as_fast_as_solved(played):
     assert report.stopped == "end of stream" and report.read == report.solved == 100 and report.dropped == 0
     assert motion["valid"].sum() >= 98 and np.array_equal(motion["frame_index"], np.arange(100))
     assert np.median(motion["reprojection_error_px"][motion["valid"]]) < 15.0
+
+
+def test_the_shape_settles_in_the_first_second_then_stays(played):
+    """The clip is 60 frames/s: after 60 frames of the person, one shape."""
+    _, motion, _ = played
+    valid = np.flatnonzero(motion["valid"])
+    assert np.all(motion["betas"][valid[61:]] == motion["betas"][valid[61]])
+    assert motion["betas"][valid[:61]].std(0).max() > 0.0  # it was settling
+    assert_one_body(motion, slice(61, None))
 
 
 def test_the_stream_carries_the_recorded_bodies(played):

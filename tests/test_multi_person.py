@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import jaxmocap.pipeline.job as pipeline_job
-from conftest import interrupted_at_chunk
+from conftest import assert_one_body, interrupted_at_chunk
 from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from jaxmocap.pipeline import RunConfig
 
@@ -31,6 +31,7 @@ def test_both_people_are_tracked_and_fitted(whole_clip):
     for m in motions.values():
         assert set(m) == set(MOTION_SHAPES) | set(PINHOLE_SHAPES) and len(m["valid"]) == 100
         assert np.median(m["reprojection_error_px"][m["valid"]]) <= 12.0
+        assert_one_body(m)
     main = max(seen, key=lambda i: seen[i].sum())
     assert (out / "motion.npz").read_bytes() == (out / "people" / str(main) / "motion.npz").read_bytes()
 

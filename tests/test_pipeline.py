@@ -20,7 +20,7 @@ import jaxmocap.pipeline.job as pipeline_job
 import jaxmocap.pipeline.regress as regress_module
 import jaxmocap.pipeline.stages as stages_module
 import smplx_jax
-from conftest import interrupted_at_chunk
+from conftest import assert_one_body, interrupted_at_chunk
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
 from jaxmocap.io import file_sha256
@@ -348,6 +348,7 @@ def test_copy_paste_motion_is_the_regressors_output(frankmocap, frankmocap_run):
                                            _reference_hand(hand_net, frame, box, side), atol=2e-3)
     seen = [(motion["keypoints_2d"][:, hand, 2] > 0).any(axis=1) for hand in (slice(25, 46), slice(46, 67))]
     assert hands == np.sum(seen) >= 1  # every hand the detector found
+    assert_one_body(motion)  # the median of the regressor's shapes
 
 
 def test_optimize_fits_the_keypoints_better_than_copy_paste(frankmocap_run):
@@ -357,6 +358,7 @@ def test_optimize_fits_the_keypoints_better_than_copy_paste(frankmocap_run):
     copy, fitted = (errors[k]["reprojection_error_px"] for k in ("copy-paste", "optimize"))
     print("copy-paste", np.round(copy, 1), "optimize", np.round(fitted, 1))  # measured: at most 0.26 times
     assert errors["optimize"]["valid"].all() and np.all(fitted < 0.4 * copy)
+    assert_one_body(errors["optimize"])
 
 
 @pytest.mark.parametrize("hand_boxes, mode", [("body", "whole"), ("keypoints", "body")])

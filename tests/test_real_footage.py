@@ -5,6 +5,8 @@ BlazePose's own monocular 3D."""
 import pytest
 
 from bench import accuracy
+from conftest import assert_one_body
+from jaxmocap.motion import read_motion
 
 
 @pytest.fixture(scope="module")
@@ -20,6 +22,10 @@ def scored(run_dir):
 
 def test_one_person_is_one_identity(scored, run_dir):
     assert [p.name for p in (run_dir / "people").iterdir()] == ["0"]
+
+
+def test_one_body_over_the_whole_clip(scored, run_dir):
+    assert_one_body(read_motion(run_dir / "motion.npz"))
 
 
 def test_the_fit_sits_on_the_person(scored):

@@ -161,9 +161,9 @@ def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXPara
     return fit_one(km, keypoints, pose, init.betas, camera, lens, config, adjoint=adjoint)
 
 
-@functools.partial(jax.jit, static_argnames=("config",))
-def _fit_batch(km, keypoints, pose, betas, camera, lens, config: FitConfig):
-    one = functools.partial(fit_one, config=config)
+@functools.partial(jax.jit, static_argnames=("config", "fixed_shape"))
+def _fit_batch(km, keypoints, pose, betas, camera, lens, config: FitConfig, fixed_shape: bool = False):
+    one = functools.partial(fit_one, config=config, fit_betas=jnp.zeros((), pose.dtype) if fixed_shape else None)
     return jax.vmap(one, in_axes=(None, 0, 0, 0, None if camera is None else 0, None))(km, keypoints, pose, betas,
                                                                                        camera, lens)
 
@@ -189,12 +189,13 @@ def _check(name, value, shape, dtype):
 
 def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_scale=None, camera_trans=None, *,
         focal_length: float | None = None, principal_point=None, iterations: int = 20,
-        config: FitConfig | None = None, progress=None) -> FitResult:
-    """Fit every frame of ``keypoints (T, 67, 3)`` (`fit_frame` vmapped). ``init``: batched `SMPLXParams` (T
-    leading), default `default_pose` with mean shape. Camera: given (both arrays), or fitted to the start; a
-    pinhole of ``focal_length`` and ``principal_point`` or weak perspective (`fit_frame`).
-    ``progress(n)`` is called after each chunk with the number of frames done. Runs in the model's precision
-    (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64)."""
+        config: FitConfig | None = None, fixed_shape: bool = False, progress=None) -> FitResult:
+    """Fit every frame of ``keypoints (T, 67, 3)`` (`fit_frame` vmapped). ``init``: batched `SMPLXParams` (T leading),
+    default `default_pose` with mean shape; ``fixed_shape``: keep ``init.betas`` (fit pose and camera). Camera: given
+    (both arrays), or fitted to the start; a pinhole of ``focal_length`` and ``principal_point`` or weak perspective
+    (`fit_frame`). ``progress(n)`` is called after each chunk with the number of frames done. Runs in the model's
+    precision (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64).
+    """
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
     dtype = np.dtype(model.joint_template.dtype)
     keypoints = np.asarray(keypoints, dtype)
@@ -218,7 +219,7 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
     def fit_chunk(frames, n):
         kp, *rest = frames
         kp = np.concatenate([kp[:n], np.zeros_like(kp[n:])])  # padding frames have no keypoints
-        out = jax.block_until_ready(_fit_batch(km, *shard_frames((kp, *rest), len(kp)), lens, config))
+        out = jax.block_until_ready(_fit_batch(km, *shard_frames((kp, *rest), len(kp)), lens, config, fixed_shape))
         if progress is not None:
             progress(n)
         return out

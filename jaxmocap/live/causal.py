@@ -34,9 +34,11 @@ from smplx_jax import constants
 class LiveSettings:
     """How much each frame solves, and how the One-Euro filter smooths: rotations (speeds in quaternion units
     per second, about half the angular speed in radians), the translation across the image and in depth (metres;
-    depth, which one view barely sees, the most), the weak-perspective camera (pixels) and the shape. Lighter
-    filters lag less and jitter more (docs/BENCHMARKS.md, "Live"). A person unseen for more than ``reset_after``
-    seconds starts afresh, with ``warm_up`` steps on their first frame. ``hands``: the hands' IK runs (not with
+    depth, which one view barely sees, the most) and the weak-perspective camera (pixels). Lighter filters lag
+    less and jitter more (docs/BENCHMARKS.md, "Live"). The shape is the mean of the fitted shapes over the
+    person's first ``shape_settle`` seconds, then held: the fit keeps it and moves only pose and camera. A person
+    unseen for more than ``reset_after`` seconds starts afresh (their shape kept), with ``warm_up`` steps on
+    their first frame. ``hands``: the hands' IK runs (not with
     ``--mode body``: the hands stay flat)."""
 
     hands: bool = True
@@ -46,13 +48,14 @@ class LiveSettings:
     translation: OneEuro = OneEuro(min_cutoff=1.0, beta=20.0)
     depth: OneEuro = OneEuro(min_cutoff=0.3, beta=2.0)
     camera: OneEuro = OneEuro(min_cutoff=1.0, beta=0.5)
-    shape: OneEuro = OneEuro(min_cutoff=0.2)
+    shape_settle: float = 1.0
     reset_after: float = 0.5
     warm_up: int = 4
 
 
 class PersonState(NamedTuple):
-    """What a person carries to their next frame: the last IK pose and shape (the next start) and the filters."""
+    """What a person carries to their next frame: the last IK pose and shape (the next start), the filters and
+    their shape (the mean over ``shape_seconds`` of frames)."""
 
     theta: Float[Array, "55 3"]
     betas: Float[Array, "B"]
@@ -60,7 +63,8 @@ class PersonState(NamedTuple):
     translation: Filtered  # (1, 2): across the image
     depth: Filtered  # (1, 1)
     camera: Filtered  # (1, 3): scale, tx, ty
-    shape: Filtered  # (1, B)
+    shape: Float[Array, "B"]
+    shape_seconds: Float[Array, ""]
 
 
 class Solved(NamedTuple):
@@ -82,11 +86,12 @@ class Models(NamedTuple):
 
 
 def fresh_state(num_betas: int) -> PersonState:
-    """The state of a person not seen before: the fit's default pose, mean shape (filters reset on use)."""
+    """The state of a person not seen before: the fit's default pose, mean shape (filters reset on use), no
+    shape yet."""
     theta = default_pose()
     betas = jnp.zeros(num_betas, jnp.float32)
     return PersonState(theta, betas, quaternion_state(theta), start_state(jnp.zeros((1, 2))),
-                       start_state(jnp.zeros((1, 1))), start_state(jnp.zeros((1, 3))), start_state(betas[None]))
+                       start_state(jnp.zeros((1, 1))), start_state(jnp.zeros((1, 3))), betas, jnp.zeros(()))
 
 
 _MASKS = tuple(jnp.asarray(m, jnp.float32) for m in (BODY_IK_JOINTS, LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS))
@@ -106,21 +111,27 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
         seen = jnp.full(21, jnp.where(hands_conf[side] > 0, 1.0, 0.0))
         theta, betas, _, _ = ik_one(km, hands_world[side], seen, theta, betas, _MASKS[1 + side], 0.0, ik_config)
     fit_config = dataclasses.replace(FIT_FROM_IK, iterations=settings.fit_iterations)
-    fitted = fit_one(models.openpose, keypoints, theta, betas, None, lens, fit_config)
+    settled = state.shape_seconds >= settings.shape_settle
+    fitted = fit_one(models.openpose, keypoints, theta, jnp.where(settled, state.shape, betas), None, lens,
+                     fit_config, fit_betas=jnp.where(settled, 0.0, 1.0))
     p = fitted.params
     camera = jnp.concatenate([fitted.camera_scale[None], fitted.camera_trans])[None]
+    weight = jnp.where(fresh | settled, 0.0, jnp.minimum(dt, 0.1))  # seconds this frame adds to the shape's mean
+    seconds = state.shape_seconds + weight
+    shape = jnp.where(state.shape_seconds > 0, (state.shape * state.shape_seconds + p.betas * weight)
+                      / jnp.maximum(seconds, 1e-6), p.betas)
+    shape = jnp.where(settled, state.shape, shape)
     begin = jax.tree.map(lambda a, b: jnp.where(fresh, a, b), PersonState(
         theta, betas, quaternion_state(p.full_pose()), start_state(p.transl[None, :2]),
-        start_state(p.transl[None, 2:]), start_state(camera), start_state(p.betas[None])), state)
+        start_state(p.transl[None, 2:]), start_state(camera), state.shape, state.shape_seconds), state)
     pose, rotations = one_euro_rotvecs(p.full_pose(), begin.rotations, dt, settings.rotations)
     across, translation = one_euro(p.transl[None, :2], begin.translation, dt, settings.translation)
     depth, depth_state = one_euro(p.transl[None, 2:], begin.depth, dt, settings.depth)
     cam, camera = one_euro(camera, begin.camera, dt, settings.camera)
-    shape, shape_state = one_euro(p.betas[None], begin.shape, dt, settings.shape)
     valid = fitted.status == OK
-    new = PersonState(theta, betas, rotations, translation, depth_state, camera, shape_state)
+    new = PersonState(theta, betas, rotations, translation, depth_state, camera, shape, seconds)
     new = jax.tree.map(lambda a, b: jnp.where(valid, a, b), new, state)
-    params = params_of(pose, shape[0], num_expression).replace(transl=jnp.concatenate([across[0], depth[0]]))
+    params = params_of(pose, shape, num_expression).replace(transl=jnp.concatenate([across[0], depth[0]]))
     return Solved(params, cam[0, 0], cam[0, 1:], valid), new
 
 
@@ -151,7 +162,8 @@ class CausalSolver:
             state, last = self.people.get(person_id, (None, -np.inf))
             fresh = state is None or now - last > self.settings.reset_after
             if fresh:
-                state = fresh_state(self.num_betas)
+                new = fresh_state(self.num_betas)
+                state = new if state is None else new._replace(shape=state.shape, shape_seconds=state.shape_seconds)
             dt = jnp.float32(max(now - last, 1e-3) if not fresh else 1.0)
             for _ in range(self.settings.warm_up if fresh else 1):
                 out, state = step(self.models, arrays, state, jnp.asarray(fresh), dt, self.lens,

@@ -179,8 +179,12 @@ class Session:
             self.detected.put((frame, self._observe(frame.image)), wait=self.source.lossless)
 
     def _observe(self, image: np.ndarray) -> dict[int, Observations]:
-        """What the solve needs of one frame: each person's observations by identity."""
-        return observe_people(self.detector, self.tracker, [image])
+        """What the solve needs of one frame: each person's observations by identity (with ``--max-people 1``
+        always identity 0: one person, whoever the tracker thinks it is after a restart or a drop-out)."""
+        people = observe_people(self.detector, self.tracker, [image])
+        if self.config.max_people == 1:
+            return dict(enumerate(people.values()))  # at most one: identity 0
+        return people
 
     def _posed(self, solved: dict[int, Solved]) -> list[Posed]:
         """The meshes the page draws of one frame's results."""

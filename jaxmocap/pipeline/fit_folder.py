@@ -16,7 +16,7 @@ from jaxmocap.integrate import fitting
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import motion_params, read_motion, write_motion
 from jaxmocap.pipeline.records import Bodies
-from jaxmocap.pipeline.stages import motion_arrays, smoothed
+from jaxmocap.pipeline.stages import motion_arrays, one_shape, smoothed
 
 
 def read_keypoint_folder(folder) -> tuple[list[Path], np.ndarray]:
@@ -102,6 +102,7 @@ def fit_keypoint_folder(keypoints_dir, out_dir, *, model_path=None, iterations: 
             bar.close()
     bodies = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
                     np.asarray(result.camera_trans), np.asarray(result.valid))
+    bodies = one_shape(model, bodies, keypoints, (None, None), fitting.FitConfig(), iterations)
     motion = motion_arrays(model, smoothed(model, bodies, keypoints) if smooth else bodies, keypoints)
     size = image_size if image_size else infer_image_size(keypoints)
     return write_motion(Path(out_dir) / "motion.npz", motion | {

@@ -23,16 +23,28 @@ from jaxmocap.detect import Detector
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.frame_source import Media, open_media
+from jaxmocap.integrate import FitConfig
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
+from jaxmocap.pipeline.merge_tracks import merge_split_tracks
 from jaxmocap.pipeline.outputs import write_keypoints, write_outputs
 from jaxmocap.pipeline.records import Bodies, Chunk, Track
 from jaxmocap.pipeline.regress import Regression, regressed_bodies
-from jaxmocap.pipeline.stages import Lens, fitted_bodies, initial_bodies, lens_of, motion_arrays, observations, smoothed
+from jaxmocap.pipeline.stages import (
+    FIT_FROM_IK,
+    Lens,
+    fitted_bodies,
+    initial_bodies,
+    lens_of,
+    motion_arrays,
+    observations,
+    one_shape,
+    smoothed,
+)
 
 SETTINGS_VERSION = 5  # of the stored chunks: bump when what a chunk holds changes
 
@@ -89,8 +101,14 @@ def run(config: RunConfig, out_dir) -> RunReport:
     store = ChunkStore(out_dir, chunk_key(config, inputs.model_sha256) | {"version": SETTINGS_VERSION})
     chrono = Chrono()
     chunks = list(solved_chunks(config, inputs, store, out_dir, chrono))
+    with chrono("shape"):
+        video = inputs.media.kind in ("video", "webcam")
+        tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
+                                    config.max_people)
+        tracks = {i: dataclasses.replace(t, bodies=one_shape(inputs.model, t.bodies, t.keypoints_2d, inputs.lens,
+                                                             *shape_fit(config, inputs)))
+                  for i, t in tracks.items()}
     with chrono("smooth"):
-        tracks = whole_tracks(chunks, inputs.model)
         if config.smooth:
             tracks = {i: dataclasses.replace(t, bodies=smoothed(inputs.model, t.bodies, t.keypoints_2d, inputs.lens))
                       for i, t in tracks.items()}
@@ -108,6 +126,14 @@ def run(config: RunConfig, out_dir) -> RunReport:
     written += write_outputs(config, out_dir, inputs.model, inputs.media, motions, main, tracks, chunks, chrono)
     store.clear()
     return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions))
+
+
+def shape_fit(config: RunConfig, inputs: Inputs) -> tuple[FitConfig | None, int]:
+    """How `one_shape` fits the poses again with the person's shape: as the run's fit did (none after the
+    regressors' copy-and-paste or EFT alone)."""
+    if inputs.regression is None:
+        return FIT_FROM_IK, config.iterations
+    return (FitConfig() if config.integration == "optimize" else None), config.iterations
 
 
 def main_person(motions: dict[int, dict]) -> int | None:

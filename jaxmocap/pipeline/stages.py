@@ -1,8 +1,8 @@
 """The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector, each person by identity) ->
 for each person `initial_bodies` (IK from the 3D landmarks) -> `fitted_bodies` (the fit to the 2D keypoints); with
 FrankMocap's weights the regressors (`regress.regressed_bodies`) stand in for the middle two. Over the whole
-sequence, for each person: `smoothed` -> `motion_arrays` (what ``motion.npz`` holds); then the outputs
-(`outputs`)."""
+sequence, for each person (split tracks joined: `merge_tracks`): `one_shape` -> `smoothed` -> `motion_arrays` (what
+``motion.npz`` holds); then the outputs (`outputs`)."""
 
 import dataclasses
 
@@ -71,6 +71,27 @@ def fitted_bodies(model: smplx_jax.BodyModel, obs: Observations, init: smplx_jax
                                        principal_point=lens[1], iterations=iterations, config=FIT_FROM_IK))
     return Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
                   np.asarray(result.camera_trans), obs.found & np.asarray(result.valid))
+
+
+def one_shape(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens,
+              config: FitConfig | None, iterations: int = 20) -> Bodies:
+    """One body shape for the person in every frame: the per-component median of the frames' fitted ``betas``
+    over the valid frames, then each frame's pose and camera fitted again with that shape held (``config``: the
+    fit's; None, as after copy-and-paste, keeps the poses). A person has one body, and exports one bone length."""
+    if not bodies.valid.any():
+        return bodies
+    betas = np.broadcast_to(np.median(bodies.params.betas[bodies.valid], axis=0), bodies.params.betas.shape)
+    params = bodies.params.replace(betas=np.array(betas, np.float32))
+    if config is None:
+        return dataclasses.replace(bodies, params=params)
+    result = jax.block_until_ready(fit(model, keypoints_2d, init=params, focal_length=lens[0],
+                                       principal_point=lens[1], iterations=iterations, config=config,
+                                       fixed_shape=True))
+    refitted = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
+                      np.asarray(result.camera_trans), bodies.valid)
+    use = bodies.valid & np.asarray(result.valid)  # a frame whose refit failed keeps its pose
+    return jax.tree.map(lambda new, old: np.where(use.reshape((-1,) + (1,) * (new.ndim - 1)), new, old),
+                        refitted, dataclasses.replace(bodies, params=params))
 
 
 _SMOOTH = jax.jit(smooth_params)
