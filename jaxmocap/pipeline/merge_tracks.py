@@ -9,7 +9,7 @@ every track is that person.
 
 import numpy as np
 
-from jaxmocap.pipeline.records import Track
+from jaxmocap.pipeline.records import Track, frames_where
 
 MAX_GAP_SECONDS = 2.0
 MAX_JUMP = 1.0  # box heights between where one track ends and the next begins
@@ -39,12 +39,7 @@ def continues(earlier: Track, later: Track, fps: float) -> bool:
 
 def joined(earlier: Track, later: Track) -> Track:
     """One track: ``later``'s frames where it found the person, ``earlier``'s elsewhere."""
-    import jax
-
-    def pick(a, b):
-        return np.where(later.found.reshape((-1,) + (1,) * (a.ndim - 1)), b, a)
-
-    return jax.tree.map(pick, earlier, later)
+    return frames_where(later.found, later, earlier)
 
 
 def merge_split_tracks(tracks: dict[int, Track], fps: float | None, max_people: int) -> dict[int, Track]:

@@ -10,6 +10,12 @@ import numpy as np
 import smplx_jax
 
 
+def frames_where(mask: np.ndarray, chosen, other):
+    """Frame by frame (``mask (T,)``), ``chosen``'s leaves where true and ``other``'s elsewhere: two pytrees of
+    per-frame arrays (`Bodies`, `Track`)."""
+    return jax.tree.map(lambda a, b: np.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), chosen, other)
+
+
 @jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class Bodies:

@@ -19,7 +19,7 @@ from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.integrate.smooth import smooth_camera, smooth_params
 from jaxmocap.pipeline.observe import Observations, observe_people, repaired
-from jaxmocap.pipeline.records import Bodies
+from jaxmocap.pipeline.records import Bodies, frames_where
 
 Lens = tuple[float, np.ndarray] | tuple[None, None]  # a pinhole camera's (focal_length, principal_point), or none
 
@@ -90,8 +90,7 @@ def one_shape(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarr
     refitted = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
                       np.asarray(result.camera_trans), bodies.valid)
     use = bodies.valid & np.asarray(result.valid)  # a frame whose refit failed keeps its pose
-    return jax.tree.map(lambda new, old: np.where(use.reshape((-1,) + (1,) * (new.ndim - 1)), new, old),
-                        refitted, dataclasses.replace(bodies, params=params))
+    return frames_where(use, refitted, dataclasses.replace(bodies, params=params))
 
 
 _SMOOTH = jax.jit(smooth_params)
@@ -115,8 +114,7 @@ def smoothed(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
                         for b in (bodies, smooth))
     ratio, pixels = SMOOTHING_SLACK
     keep = filtered > np.maximum(ratio * fitted, fitted + pixels)
-    return jax.tree.map(lambda own, new: np.where(keep.reshape((-1,) + (1,) * (own.ndim - 1)), own, new), bodies,
-                        smooth)
+    return frames_where(keep, bodies, smooth)
 
 
 def motion_arrays(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens = (None, None)
