@@ -127,28 +127,36 @@ class Stages:
 
 
 def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
-    """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before smoothing, from
-    the same library calls."""
-    import smplx_jax
-    from jaxmocap.detect import Detector
-    from jaxmocap.frame_source import open_media
-    from jaxmocap.motion import lens, read_motion
-    from jaxmocap.pipeline import Bodies, RunConfig, fitted_bodies, initial_bodies, motion_arrays, observe, run
-    from jaxmocap.pipeline.observe import repaired
+    """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before the shape and
+    smoothing from what the run itself observed and fitted, chunk by chunk (`run`'s ``observed``): BlazePose's
+    world landmarks (left and right put back where the detector exchanged them, as the fit takes them), the IK
+    start from the same observations, the fit. The take has one person: each frame's is the lowest id found."""
+    import jax
 
-    run(RunConfig(video, end=end, overlay=False, progress=False), work)
-    motion = read_motion(work / "motion.npz")
+    import smplx_jax
+    from jaxmocap.motion import lens, read_motion
+    from jaxmocap.pipeline import Bodies, RunConfig, initial_bodies, motion_arrays, run
+    from jaxmocap.pipeline.records import frames_where
+
     model = smplx_jax.load_model(smplx_jax.default_model_path())
-    media, frames = open_media(video, 0, end, 1)
-    frames = [frame for _, frame in frames]
-    detected = observe(Detector(static_image_mode=False), frames)  # BlazePose's own, unrepaired
-    blazepose = np.where(detected.found[:, None, None], detected.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], np.nan)
-    obs = repaired(detected, media.fps)  # as `run` observes
-    init = initial_bodies(model, obs)
-    count = len(obs.found)
-    ik = motion_arrays(model, Bodies(init, np.ones(count), np.zeros((count, 2)), obs.found), obs.keypoints)
-    fitted = motion_arrays(model, fitted_bodies(model, obs, init, lens(motion)), obs.keypoints, lens(motion))
-    return Stages(blazepose, ik, fitted, motion)
+    chunks = []  # per chunk: (BlazePose's limbs, IK bodies, fitted bodies, 2D keypoints)
+
+    def observed(chunk, people):
+        count = len(chunk.frame_index)
+        part = (np.full((count, 12, 3), np.nan), Bodies.absent(count, model), Bodies.absent(count, model),
+                np.zeros((count, 67, 3)))
+        for person_id in sorted(people, reverse=True):
+            obs, track = people[person_id], chunk.people[person_id]
+            ik = Bodies(initial_bodies(model, obs), np.ones(count), np.zeros((count, 2)), obs.found)
+            mine = (obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], ik, track.bodies, track.keypoints_2d)
+            part = frames_where(obs.found, mine, part)
+        chunks.append(part)
+
+    run(RunConfig(video, end=end, overlay=False, progress=False), work, observed=observed)
+    motion = read_motion(work / "motion.npz")
+    blazepose, ik, fitted, keypoints = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
+    return Stages(blazepose, motion_arrays(model, ik, keypoints),
+                  motion_arrays(model, fitted, keypoints, lens(motion)), motion)
 
 
 def limb_joints(motion: dict) -> np.ndarray:

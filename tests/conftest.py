@@ -2,7 +2,10 @@
 interrupted on purpose."""
 
 import contextlib
+import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +22,28 @@ install_import_hook(
     "beartype.beartype(conf=beartype.BeartypeConf(is_pep484_tower=True, strategy=beartype.BeartypeStrategy.On))")
 
 sys.path.insert(0, str(Path(__file__).parent))
+
+
+def pytest_configure(config):
+    """One on-disk cache of compiled programs for the whole run, new and empty (as on a new machine; not the
+    user's ``~/.cache/jaxmocap/xla``), shared by pytest-xdist's workers and the subprocesses tests start, so that a
+    program one test compiled is read back by another (the suite's time is mostly XLA compiling). The controller
+    names it; the workers inherit its environment."""
+    import jax
+
+    if "JAXMOCAP_TEST_CACHE" not in os.environ or not hasattr(config, "workerinput"):
+        os.environ["JAXMOCAP_TEST_CACHE"] = tempfile.mkdtemp(prefix="jaxmocap-tests-")
+    cache = str(Path(os.environ["JAXMOCAP_TEST_CACHE"]) / "xla")
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = cache
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+    jax.config.update("jax_compilation_cache_dir", cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+
+def pytest_unconfigure(config):
+    if not hasattr(config, "workerinput"):  # the controller (or a run without workers), after all of them
+        shutil.rmtree(os.environ["JAXMOCAP_TEST_CACHE"], ignore_errors=True)
+
 
 import smplx_jax  # noqa: E402
 from random_model import random_model_arrays  # noqa: E402
@@ -42,6 +67,15 @@ def default_model_dir() -> Path:
 @pytest.fixture(scope="session", params=["default", "random"])
 def model_dir(request, default_model_dir, random_model_dir) -> Path:
     return default_model_dir if request.param == "default" else random_model_dir
+
+
+@pytest.fixture(scope="module")
+def x64():
+    """Float64 throughout the module that asks for it."""
+    import jax
+
+    with jax.enable_x64(True):
+        yield
 
 
 _LOADED = {}

@@ -68,7 +68,7 @@ def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     targets = jnp.where(finite[:, None], targets, 0.0)
     w = conf / jnp.maximum(jnp.sum(conf), 1e-12)
     offset = jnp.sum(w[:, None] * (targets - keypoints_cm(km, theta, betas).T), 0)
-    prior = jnp.asarray(least_squares.prior_weights(config))
+    prior = jnp.asarray(least_squares.prior_weights(config), theta.dtype)
     problem = least_squares.Problem(km, targets, conf, theta, betas, prior, jnp.ones((), theta.dtype), free_joints,
                                     fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
     start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))

@@ -47,10 +47,11 @@ BEND_LIMITS = ((18, 1, 1.0, 0.0), (19, 1, -1.0, 0.0), (4, 0, -1.0, 0.0), (5, 0, 
 _BEND_JOINT, _BEND_AXIS, _BEND_SIGN, _BEND_SLACK = (list(c) for c in zip(*BEND_LIMITS))  # lists: no cached dtypes
 
 
-def bend_weights(config) -> np.ndarray:
-    """The weight of each of `BEND_LIMITS`, metres per radian."""
+def bend_weights(config, dtype=np.float32) -> np.ndarray:
+    """The weight of each of `BEND_LIMITS`, metres per radian, in ``dtype`` (the pose's: a float32 weight would
+    round a float64 fit's terms to float32 when the scale it multiplies is weakly typed)."""
     return np.where(np.arange(len(BEND_LIMITS)) < len(BEND_LIMITS) - len(_FINGER_RANGE), config.prior_bend,
-                    config.prior_finger_range).astype(np.float32)
+                    config.prior_finger_range).astype(dtype)
 
 
 def _bend(pose):
@@ -171,14 +172,14 @@ def residuals(y: Unknowns, problem: Problem, config: SolverConfig) -> Residuals:
     sref = problem.scale_ref
     return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(cauchy_u(r, problem, config))),
                      sref * problem.prior * (pose - problem.pose0), sref * config.prior_betas * betas,
-                     sref * bend_weights(config) * jax.nn.relu(_bend(pose)))
+                     sref * bend_weights(config, pose.dtype) * jax.nn.relu(_bend(pose)))
 
 
 def prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Unknowns]:
     """The gradient and the (Gauss-Newton, diagonal) Hessian of the priors' half sum of squares."""
     sref = problem.scale_ref
     pose_weight = (sref * problem.prior) ** 2
-    bend_weight, bend = (sref * bend_weights(config)) ** 2, _bend(pose)
+    bend_weight, bend = (sref * bend_weights(config, pose.dtype)) ** 2, _bend(pose)
     gradient = (pose_weight * (pose - problem.pose0)).at[_BEND_JOINT, _BEND_AXIS].add(
         bend_weight * jax.nn.relu(bend) * jnp.asarray(_BEND_SIGN, pose.dtype))
     hessian = pose_weight.at[_BEND_JOINT, _BEND_AXIS].add(bend_weight * (bend > 0))

@@ -11,7 +11,7 @@ temporal smoothing -> ``motion.npz`` -> the outputs. ``--mode hands`` is `hands_
 """
 
 import dataclasses
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
@@ -31,6 +31,7 @@ from jaxmocap.pipeline.chunks import ChunkStore
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
+from jaxmocap.pipeline.observe import Observations
 from jaxmocap.pipeline.outputs import write_keypoints, write_outputs
 from jaxmocap.pipeline.records import Bodies, Chunk, Track
 from jaxmocap.pipeline.regress import Regression, regressed_bodies
@@ -46,6 +47,7 @@ from jaxmocap.pipeline.stages import (
     smoothed,
 )
 
+Observer = Callable[[Chunk, dict[int, Observations]], None]
 SETTINGS_VERSION = 5  # of the stored chunks: bump when what a chunk holds changes
 
 
@@ -87,10 +89,12 @@ class Inputs:
         return cls(model, file_sha256(model_path), regression, given, media, frames, lens)
 
 
-def run(config: RunConfig, out_dir) -> RunReport:
+def run(config: RunConfig, out_dir, observed: Observer | None = None) -> RunReport:
     """Run ``config`` and write ``out_dir/motion.npz`` (the main person; docs/formats.md), each person's
     ``out_dir/people/<id>/motion.npz``, the detections as OpenPose JSON in ``out_dir/keypoints/``, and the outputs
-    ``config`` asks for (`write_outputs`). ``--mode hands`` is `hands_job.run_hands`'s (``out_dir/hands.npz``)."""
+    ``config`` asks for (`write_outputs`). ``--mode hands`` is `hands_job.run_hands`'s (``out_dir/hands.npz``).
+    ``observed(chunk, people)``, if given, sees each chunk solved (not those restored from a stored run) with its
+    people's `Observations` by identity, as the fit took them (`bench/accuracy.py` scores the stages from them)."""
     if config.mode == "hands":
         from jaxmocap.pipeline.hands_job import run_hands
 
@@ -100,7 +104,7 @@ def run(config: RunConfig, out_dir) -> RunReport:
     inputs = Inputs.open(config)
     store = ChunkStore(out_dir, chunk_key(config, inputs.model_sha256) | {"version": SETTINGS_VERSION})
     chrono = Chrono()
-    chunks = list(solved_chunks(config, inputs, store, out_dir, chrono))
+    chunks = list(solved_chunks(config, inputs, store, out_dir, chrono, observed))
     with chrono("shape"):
         video = inputs.media.kind in ("video", "webcam")
         tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
@@ -148,8 +152,8 @@ def whole_tracks(chunks: list[Chunk], model: smplx_jax.BodyModel) -> dict[int, T
             for i in people}
 
 
-def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir: Path, chrono: Chrono
-                  ) -> Iterator[Chunk]:
+def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir: Path, chrono: Chrono,
+                  observed: Observer | None = None) -> Iterator[Chunk]:
     """Each chunk of frames, from the store if it holds it, else through the per-chunk stages (`solve_chunk`),
     then stored and its detections written as OpenPose JSON. The detector's tracks and the identities carry on
     from chunk to chunk (in a video), restored from a stored chunk's."""
@@ -166,7 +170,8 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
-                chunk = solve_chunk(config, inputs, detector, tracker, ids, [frame for _, frame in batch], chrono)
+                chunk = solve_chunk(config, inputs, detector, tracker, ids, [frame for _, frame in batch], chrono,
+                                    observed)
                 store.save(index, chunk)
                 with chrono("keypoints"):
                     write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
@@ -179,7 +184,7 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
 
 
 def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
-                ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono) -> Chunk:
+                ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono, observed: Observer | None = None) -> Chunk:
     """One chunk through detection, then for each person IK and the fit (or the regressors)."""
     with chrono("detect"):
         given = None if inputs.given_keypoints is None else np.stack(
@@ -199,7 +204,10 @@ def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: 
                 bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, obs,
                                                       config.integration, config.iterations)
         tracks[person_id] = Track(obs.keypoints, obs.body_box, hand_boxes, obs.found, bodies)
-    return Chunk(ids, tracks, _tracking(detector, tracker))
+    chunk = Chunk(ids, tracks, _tracking(detector, tracker))
+    if observed is not None:
+        observed(chunk, people)
+    return chunk
 
 
 def _tracking(detector: Detector, tracker: IdentityTracker | None) -> dict[str, np.ndarray]:
