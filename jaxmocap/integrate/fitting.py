@@ -44,7 +44,7 @@ FitConfig = least_squares.SolverConfig
 class FitResult(NamedTuple):
     """A fit: one frame from `fit_frame`, a leading axis T from `fit`. ``status``: 0 fitted, 1 too few
     keypoints, 2 numerical failure; frames with a non-zero status hold the initial parameters and camera.
-    ``converged``: the solve met its stopping rule (`least_squares.LevenbergMarquardt`) rather than its step cap
+    ``converged``: the solve met its stopping rule (`levenberg_marquardt.LevenbergMarquardt`) rather than its step cap
     (``iterations``); implicit gradients are exact where it did.
     ``camera_scale``, ``camera_trans``: the weak-perspective projection of the fitted body (``transl`` included;
     docs/formats.md, "Coordinates and cameras"), for a pinhole camera the one closest to its projection.

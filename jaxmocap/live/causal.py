@@ -38,8 +38,7 @@ class LiveSettings:
     less and jitter more (docs/BENCHMARKS.md, "Live"). The shape is the mean of the fitted shapes over the
     person's first ``shape_settle`` seconds, then held: the fit keeps it and moves only pose and camera. A person
     unseen for more than ``reset_after`` seconds starts afresh (their shape kept), with ``warm_up`` steps on
-    their first frame. ``hands``: the hands' IK runs (not with
-    ``--mode body``: the hands stay flat)."""
+    their first frame. ``hands``: the hands' IK runs (not with ``--mode body``: the hands stay flat)."""
 
     hands: bool = True
     ik_iterations: int = 5
