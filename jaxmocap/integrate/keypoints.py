@@ -201,6 +201,7 @@ class Linearization(NamedTuple):
     jl: Float[Array, "3 3 55"]  # J_l(theta), the local increment per unit dtheta (pose blend shapes)
     rel: Float[Array, "3 3 55"]
     blend: Float[Array, "3 3 21"]  # skinning-weighted global rotation of each vertex joint
+    g_parent: Float[Array, "3 3 55"]  # each joint's parent's global rotation (the identity for the root)
 
 
 def linearize(km: KeypointModel, pose_rotvecs: Float[Array, "55 3"], betas: Float[Array, "B"]) -> Linearization:
@@ -220,12 +221,19 @@ def linearize(km: KeypointModel, pose_rotvecs: Float[Array, "55 3"], betas: Floa
     jb = _gather(joint_sd, vertex_sd, km.index)  # (3, B, K)
     return Linearization(_gather(p, posed.vertices, km.index), p, mat3.matmul(g_parent, jl),
                          jnp.transpose(jb, (1, 0, 2)).reshape(nb, -1),
-                         _blended_offsets(km, posed), jl, posed.rel, blend)
+                         _blended_offsets(km, posed), jl, posed.rel, blend, g_parent)
 
 
 def _blended_offsets(km: KeypointModel, posed: _Posed) -> Float[Array, "3 P"]:
     i, v = km.blended
     return km.body.sparse_skin_weights[i, v] * (posed.carried[:, i, v] - posed.vertices[:, v])
+
+
+def in_tangent(lin: Linearization) -> Linearization:
+    """The same map with the pose moved by local increments ``R_j <- exp(dphi_j) R_j`` (in the parent's frame)
+    instead of ``dtheta``: `jvp`, `vjp` and `pose_jacobian` of the result take and give ``dphi``."""
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=lin.a.dtype)[:, :, None], lin.a.shape)
+    return lin._replace(a=lin.g_parent, jl=eye)
 
 
 def jvp(km: KeypointModel, lin: Linearization, dpose: Float[Array, "55 3"], dbetas: Float[Array, "B"], *,

@@ -3,7 +3,10 @@
 Each step takes the model of the cost at the current point (`local_model`: the keypoint errors weighted by
 Cauchy's ``rho' = conf / (1 + u)``, the analytic Jacobian of `keypoints` and of the projection, the priors),
 solves ``(H + mu diag(H)) delta = -g`` and keeps the step if the cost falls; ``mu`` follows Nielsen's rule on the
-ratio of the actual to the predicted decrease. ``SolverConfig.linear_solver`` says how the system is solved:
+ratio of the actual to the predicted decrease. Steps move each rotation by a local increment, ``R_j <- exp(dphi_j)
+R_j`` (`retract`), not its axis-angle by addition: a joint turned one way and its child turned back (a body turning
+on the spot, a neck and head) stay aligned over a whole step, where axis-angle steps drift off that valley.
+``SolverConfig.linear_solver`` says how the system is solved:
 
 * ``"cholesky"`` (default): exactly, by a dense Cholesky factorisation over the unknowns the solve moves (some
   180: the joints of ``SolverConfig.joints``, the shape, the camera). Converges: the solve stops once a step at
@@ -43,6 +46,7 @@ from jaxmocap.integrate.least_squares import (
     project,
     residuals,
 )
+from smplx_jax import rotations
 
 MAX_DAMPING = 1e10  # beyond it steps are nothing; the damping stays finite
 
@@ -120,11 +124,25 @@ class LocalModel(NamedTuple):
     blocks: Blocks | None
 
 
+def _prior_blocks(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Blocks]:
+    """The priors' gradient and Gauss-Newton Hessian in the local increments of the rotations: the axis-angle
+    moves by ``J_l(theta)^-1 dphi``, so a joint's diagonal block ``D`` becomes ``J_l^-T D J_l^-1``."""
+    gradient, hessian = prior_quadratic(pose, betas, camera, problem, config)
+    to_theta = mat3.inverse(jnp.transpose(mat3.left_jacobian(pose), (1, 2, 0)))  # (3, 3, 55)
+    weight = hessian.pose_rotvecs.T
+    pose_block = jnp.stack([jnp.stack([jnp.sum(to_theta[:, a] * weight * to_theta[:, b], 0) for b in range(3)])
+                            for a in range(3)])
+    c = camera.shape[0]
+    return (gradient._replace(pose_rotvecs=mat3.matvec_t(to_theta, gradient.pose_rotvecs.T).T),
+            Blocks(pose_block, hessian.betas, jnp.zeros((c, c), camera.dtype)))
+
+
 def local_model(y: Unknowns, problem: Problem, config: SolverConfig) -> LocalModel:
+    """The model at ``y`` in the local increments of the rotations (``R_j <- exp(dphi_j) R_j``, `retract`)."""
     d = problem.target.shape[1]
     km, joints = problem.km, solved_joints(config)
     pose, betas = pose_and_shape(y, problem)
-    lin = keypoints.linearize(km, pose, betas)
+    lin = keypoints.in_tangent(keypoints.linearize(km, pose, betas))
     scale = jnp.exp(y.camera[0])
     points, depth = project(lin.x, y.camera, problem)
     r = points - problem.target.T
@@ -141,7 +159,7 @@ def local_model(y: Unknowns, problem: Problem, config: SolverConfig) -> LocalMod
     moving[joints] = 1.0
     mask = Unknowns(jnp.broadcast_to((problem.free * moving)[:, None], pose.shape),
                     jnp.broadcast_to(problem.fit_betas, betas.shape), jnp.ones_like(y.camera))
-    prior_gradient, prior_hessian = prior_quadratic(pose, betas, y.camera, problem, config)
+    prior_gradient, prior = _prior_blocks(pose, betas, y.camera, problem, config)
 
     def jv(v: Unknowns):  # (D, K)
         dx = keypoints.jvp(km, lin, v.pose_rotvecs * mask.pose_rotvecs, v.betas * mask.betas, exact=False)
@@ -158,14 +176,14 @@ def local_model(y: Unknowns, problem: Problem, config: SolverConfig) -> LocalMod
         return jax.tree.map(jnp.multiply, tree, mask)
 
     def hessian(v: Unknowns) -> Unknowns:
-        return masked(jax.tree.map(lambda a, h, vi: a + h * vi, jtu(w * jv(v), False), prior_hessian, v))
+        return masked(jax.tree.map(jnp.add, jtu(w * jv(v), False), prior.mv(v)))
 
     gradient = masked(jax.tree.map(jnp.add, jtu(w * r, True), prior_gradient))
     if config.linear_solver == "cg":
         b_pose, b_betas = _data_blocks(lin, scale, w / depth**2, d, km)
         eye = jnp.eye(3, dtype=r.dtype)[:, :, None]
-        blocks = Blocks(jnp.where(mask.pose_rotvecs[:, 0] > 0, b_pose + prior_hessian.pose_rotvecs.T[:, None] * eye,
-                                  eye), jnp.where(mask.betas > 0, b_betas + prior_hessian.betas, 1.0),
+        blocks = Blocks(jnp.where(mask.pose_rotvecs[:, 0] > 0, b_pose + prior.pose, eye),
+                        jnp.where(mask.betas > 0, b_betas + prior.betas, 1.0),
                         _camera_block(w, dlogscale, depth))
         return LocalModel(gradient, hessian, blocks.diagonal(), None, blocks)
     nk = r.shape[1]
@@ -175,7 +193,11 @@ def local_model(y: Unknowns, problem: Problem, config: SolverConfig) -> LocalMod
     jacobian = jnp.concatenate([image(shape), dlogscale[..., None], jnp.broadcast_to(
         jnp.eye(d, dtype=r.dtype)[:, None] / depth[None, :, None], (d, nk, d))], axis=-1)  # (D, K, n)
     fixed = 1.0 - _flat(mask, config)
-    dense = (jnp.einsum("dkn,k,dkm->nm", jacobian, w, jacobian) + jnp.diag(_flat(prior_hessian, config))) \
+    m = len(joints)
+    prior_dense = jax.scipy.linalg.block_diag(
+        jnp.einsum("abj,jk->jakb", prior.pose[:, :, joints], jnp.eye(m, dtype=r.dtype)).reshape(3 * m, 3 * m),
+        jnp.diag(prior.betas), prior.camera)
+    dense = (jnp.einsum("dkn,k,dkm->nm", jacobian, w, jacobian) + prior_dense) \
         * (1.0 - fixed)[:, None] * (1.0 - fixed)[None, :] + jnp.diag(fixed)
     diagonal = _unflat(jnp.diag(dense) * (1.0 - fixed), y, config)
     return LocalModel(gradient, hessian, diagonal, dense, None)
@@ -211,6 +233,27 @@ def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig) -> U
                            options=dict(preconditioner=preconditioner), throw=False).value
 
 
+def _quat_product(a, b):
+    """``a b`` of quaternions ``(..., 4)`` (w, x, y, z)."""
+    wa, va, wb, vb = a[..., :1], a[..., 1:], b[..., :1], b[..., 1:]
+    return jnp.concatenate([wa * wb - jnp.sum(va * vb, -1, keepdims=True), wa * vb + wb * va + jnp.cross(va, vb)], -1)
+
+
+def retract(y: Unknowns, delta: Unknowns) -> Unknowns:
+    """``y`` moved by a step: each rotation by its local increment, ``R_j <- exp(dphi_j) R_j`` (the axis-angle of
+    the product nearest ``y``'s, of those that differ by whole turns), shape and camera by addition. The rotations
+    compose exactly: a joint turned one way and its child the other stay aligned however large the step."""
+    theta = y.pose_rotvecs
+    phi = rotations.quat_to_rotvec(_quat_product(rotations.rotvec_to_quat(delta.pose_rotvecs),
+                                                 rotations.rotvec_to_quat(theta)))
+    norm2 = jnp.sum(phi * phi, -1, keepdims=True)
+    turn = 2 * jnp.pi * phi / jnp.sqrt(jnp.where(norm2 > 0, norm2, 1.0))
+    candidates = jnp.stack([phi, phi - turn, phi + turn])
+    nearest = jnp.argmin(jnp.sum((candidates - theta) ** 2, -1), 0)
+    pose = jnp.take_along_axis(candidates, nearest[None, :, None], 0)[0]
+    return Unknowns(pose, y.betas + delta.betas, y.camera + delta.camera)
+
+
 def cost_of(y: Unknowns, problem: Problem, config: SolverConfig):
     """The cost at ``y``: half the sum of squares of `residuals`."""
     return 0.5 * sum(jnp.sum(part * part) for part in residuals(y, problem, config))
@@ -241,7 +284,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         model = local_model(y, args, self.config)
         delta = _step(model, state.damping, y, self.config)
         predicted = -(_dot(model.gradient, delta) + 0.5 * _dot(delta, model.hessian(delta)))
-        trial = jax.tree.map(jnp.add, y, delta)
+        trial = retract(y, delta)
         cost = cost_of(trial, args, self.config)
         accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
         ratio = (state.cost - cost) / predicted
