@@ -16,21 +16,28 @@ from jaxmocap.integrate import fit_frame, fitting
 def test_gradients_through_the_fit_match_finite_differences(x64, default_model_dir):
     """d(fitted right wrist, camera)/d(keypoints, confidences, start, camera) by implicit differentiation, against
     central differences of converged fits (float64, dense steps; priors 10x the defaults, with which this frame
-    converges: see `test_unconverged_fits_are_flagged_and_differentiated_step_by_step` for the defaults)."""
+    converges: see `test_unconverged_fits_are_flagged_and_differentiated_step_by_step` for the defaults); an unseen
+    keypoint's position has no gradient."""
     model = load64(default_model_dir)
     kp, init = synthetic64(model, seed=11, noise_px=1.0, drop=0.15)
     camera = jnp.asarray([408.0, 481.0, 542.0])  # near the weak-perspective start (400, 478, 539)
     config = fitting.FitConfig(prior_global=0.05, prior_body=0.1, prior_hand=0.05, prior_betas=0.1)
     direction = jnp.asarray([0.3, -0.8, 0.5])
-    assert bool(fit_frame(model, kp, init, camera=camera, iterations=60, config=config).converged)
 
     @jax.jit
-    def wrist(kp, init, camera):
+    def wrist_and_converged(kp, init, camera):
         result = fit_frame(model, kp, init, camera=camera, iterations=60, config=config)
-        return smplx_jax.forward_joints(model, result.params)[21] @ direction + 1e-3 * result.camera_scale
+        return smplx_jax.forward_joints(model, result.params)[21] @ direction + 1e-3 * result.camera_scale, \
+            result.converged
 
-    grads = jax.jit(jax.grad(wrist, argnums=(0, 1, 2)))(kp, init, camera)
+    def wrist(*args):
+        return wrist_and_converged(*args)[0]
+
+    grads, converged = jax.jit(jax.grad(wrist_and_converged, argnums=(0, 1, 2), has_aux=True))(kp, init, camera)
+    assert bool(converged)
     seen = np.flatnonzero(np.asarray(kp[:, 2]) > 0)
+    unseen = np.flatnonzero(np.asarray(kp[:, 2]) == 0)
+    assert len(unseen) and np.all(np.asarray(grads[0][unseen, :2]) == 0.0)  # an unseen keypoint's position: none
     probes = [(0, (int(seen[3]), 0), 0.1), (0, (int(seen[3]), 1), 0.1), (0, (int(seen[20]), 0), 0.1),
               (0, (int(seen[9]), 2), 0.01), (1, ("body_pose", 17, 1), 0.01), (1, ("global_orient", 0), 0.01),
               (2, (0,), 1.0)]
