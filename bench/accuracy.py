@@ -3,15 +3,21 @@ single-person take, scored against the multi-view 3D reference beside BlazePose'
 landmarks the fit starts from), stage by stage: BlazePose, the IK start, the fit, the smoothed motion (what
 ``jaxmocap run`` writes).
 
-    python bench/accuracy.py [--views cam01 cam03] [--out bench/results] [--sheet docs/accuracy_worst_frames.png]
-    (or: jaxmocap bench --only accuracy)
+    python bench/accuracy.py [--views cam01 cam03] [--variants mirror rotate90 crop half 30fps] [--out bench/results]
+        [--sheet docs/accuracy_worst_frames.png]    (or: jaxmocap bench --only accuracy)
+
+Variants (`--variants`) stand in for the views we don't have: each view's video as another camera would have given
+it (`write_variant`), run and scored the same way against the reference transformed alike (`variant_reference`):
+``mirror`` (left and right swap: the mirrored reference scores it), ``rotate90`` (a phone held sideways), ``crop``
+(the half of the frame around the person), ``half`` (scaled by 0.5), ``30fps`` (every other frame).
 
 Metrics, per frame where the reference has at least 8 of its 12 limb joints (L/R shoulder, elbow, wrist, hip, knee,
 ankle): PA-MPJPE (mm, after the best similarity transform of that frame), knee and elbow flexion MAE (degrees,
 alignment-free), acceleration error (mm/frame^2, second differences of the aligned joints against the reference's,
 over three consecutive scored frames); for the motion: frames valid, median and > 40 px share of the 2D
 reprojection error, the frame-to-frame change of the stored rotations (global and body joints, at 60 fps), and the
-share of finger joints bent backwards by more than 10 degrees.
+share of finger joints bent backwards by more than 10 degrees; the share of frames whose global orientation turns by
+more than 45 degrees; the number of identities the run gave the one person.
 """
 
 from __future__ import annotations
@@ -103,7 +109,51 @@ def rotation_changes_deg(global_orient: np.ndarray, body_pose: np.ndarray, valid
 def rotation_coherence(motion: dict) -> dict:
     changes = rotation_changes_deg(motion["global_orient"], motion["body_pose"], motion["valid"])
     return dict(rotation_change_median_deg=float(np.median(changes)),
-                rotation_change_over_45deg=float(np.mean(changes > 45)))
+                rotation_change_over_45deg=float(np.mean(changes > 45)),
+                global_turn_over_45deg=float(np.mean(changes[:, 0] > 45)))
+
+
+VARIANTS = ("mirror", "rotate90", "crop", "half", "30fps")
+MIRRORED_LIMBS = np.arange(12).reshape(6, 2)[:, ::-1].ravel()  # the reference's left and right exchanged
+
+
+def write_variant(video: Path, kind: str, out: Path, person_x: float) -> Path:
+    """``video`` as another camera would have given it (`VARIANTS`), written to ``out`` (mp4); ``person_x``: the
+    person's median horizontal position in pixels (``crop`` keeps the half of the width around it)."""
+    import cv2
+
+    from jaxmocap.frame_source import open_media
+
+    media, frames = open_media(video, 0, None, 2 if kind == "30fps" else 1)
+    width, height = media.size
+    left = int(np.clip(person_x - width / 4, 0, width - width // 2))
+
+    def transformed(frame):
+        if kind == "mirror":
+            return cv2.flip(frame, 1)
+        if kind == "rotate90":
+            return cv2.rotate(frame, cv2.ROTATE_90_CLOCKWISE)
+        if kind == "crop":
+            return np.ascontiguousarray(frame[:, left:left + width // 2])
+        if kind == "half":
+            return cv2.resize(frame, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
+        return frame
+
+    writer = None
+    for _, frame in frames:
+        frame = transformed(frame)
+        if writer is None:
+            writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), media.fps, frame.shape[1::-1])
+        writer.write(frame)
+    writer.release()
+    return out
+
+
+def variant_reference(reference: np.ndarray, kind: str) -> np.ndarray:
+    """The 3D reference of a variant: mirrored (x negated, left and right exchanged) or every other frame."""
+    if kind == "mirror":
+        return reference[:, MIRRORED_LIMBS] * np.array([-1.0, 1.0, 1.0])
+    return reference[::2] if kind == "30fps" else reference
 
 
 def fingers_bent_backwards(motion: dict, tolerance_deg: float = 10.0) -> float:
@@ -124,6 +174,7 @@ class Stages:
     ik: dict  # motion-like arrays of each stage (global_orient, body_pose, ..., valid)
     fit: dict
     motion: dict  # as `jaxmocap run` writes it
+    identities: int  # the people the run found (one in this take)
 
 
 def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
@@ -156,7 +207,8 @@ def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
     motion = read_motion(work / "motion.npz")
     blazepose, ik, fitted, keypoints = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
     return Stages(blazepose, motion_arrays(model, ik, keypoints),
-                  motion_arrays(model, fitted, keypoints, lens(motion)), motion)
+                  motion_arrays(model, fitted, keypoints, lens(motion)), motion,
+                  len(list((work / "people").iterdir())))
 
 
 def limb_joints(motion: dict) -> np.ndarray:
@@ -173,7 +225,7 @@ def limb_joints(motion: dict) -> np.ndarray:
 
 
 def report_view(name: str, stages: Stages, reference: np.ndarray) -> dict:
-    rows = {}
+    rows = {"identities": stages.identities}
     for stage, joints in (("blazepose", stages.blazepose), ("ik", limb_joints(stages.ik)),
                           ("fit", limb_joints(stages.fit)), ("motion", limb_joints(stages.motion))):
         result, per_frame = score(joints, reference)
@@ -238,6 +290,7 @@ def main():
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true", help="the bundled view only")
     parser.add_argument("--views", nargs="*", choices=sorted(VIEWS), default=sorted(VIEWS))
+    parser.add_argument("--variants", nargs="*", choices=VARIANTS, default=[], help="each view also so transformed")
     parser.add_argument("--sheet", type=Path, default=None, help="contact sheet PNG of the worst frames")
     args = parser.parse_args()
     import tempfile
@@ -245,25 +298,38 @@ def main():
     views = {v: VIEWS[v] for v in (["cam01"] if args.quick else args.views)}
     reference = load_reference()
     results, motions, per_frame = {}, {}, {}
-    for name, video in views.items():
-        begin = time.perf_counter()
-        with tempfile.TemporaryDirectory() as work:
-            stages = run_stages(video, Path(work))
-        results[name] = report_view(name, stages, reference) | {"seconds": time.perf_counter() - begin}
-        motions[name] = stages.motion
-        per_frame[name] = results[name]["motion"]["per_frame_pa_mpjpe_mm"]
+    for view, video in views.items():
+        for kind in (None, *args.variants):
+            name = view if kind is None else f"{view}/{kind}"
+            begin = time.perf_counter()
+            with tempfile.TemporaryDirectory() as work:
+                work = Path(work)
+                if kind is not None:
+                    person_x = float(np.median(motions[view]["camera_trans"][motions[view]["valid"], 0]))
+                    video = write_variant(views[view], kind, work / "variant.mp4", person_x)
+                stages = run_stages(video, work / "run")
+            results[name] = report_view(name, stages, variant_reference(reference, kind)) | {
+                "seconds": time.perf_counter() - begin}
+            print(f"{name}: {time.perf_counter() - begin:.0f} s", flush=True)
+            if kind is None:
+                motions[name] = stages.motion
+                per_frame[name] = results[name]["motion"]["per_frame_pa_mpjpe_mm"]
 
     print(f"\naccuracy on real footage (Pose2Sim single-person take), {platform.machine()}")
-    print(f"{'view':>6} {'stage':>10} {'frames':>6} {'PA-MPJPE mm':>11} {'flex MAE':>9} {'accel':>7} "
-          f"{'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7} {'fingers back':>12}")
+    print(f"{'view':>14} {'stage':>10} {'frames':>6} {'PA-MPJPE mm':>11} {'flex MAE':>9} {'accel':>7} "
+          f"{'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7} {'fingers back':>12} "
+          f"{'turns>45':>8} {'ids':>3}")
     for name, rows in results.items():
         for stage in ("blazepose", "ik", "fit", "motion"):
             r = rows[stage]
             extra = (f"{r['reprojection_median_px']:>9.1f} {100 * r['reprojection_over_40px']:>5.0f}% "
                      f"{100 * r['valid_share']:>5.0f}%" if "valid_share" in r else f"{'':>9} {'':>6} {'':>6}")
             coherence = (f"{r['rotation_change_median_deg']:>7.1f}° {100 * r['rotation_change_over_45deg']:>6.1f}% "
-                         f"{100 * r['fingers_backwards']:>11.1f}%" if "rotation_change_median_deg" in r else "")
-            print(f"{name:>6} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
+                         f"{100 * r['fingers_backwards']:>11.1f}% {100 * r['global_turn_over_45deg']:>7.1f}%"
+                         if "rotation_change_median_deg" in r else "")
+            if stage == "motion":
+                coherence += f" {rows['identities']:>3}"
+            print(f"{name:>14} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
                   f"{r['flexion_mae_deg']:>8.1f}° {r['accel_error_mm']:>7.1f} {extra} {coherence}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "accuracy.json").write_text(json.dumps(dict(benchmark="accuracy", machine=platform.machine(),
