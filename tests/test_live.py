@@ -233,17 +233,23 @@ def test_live_agrees_with_the_offline_run(played, tmp_path):
 
 
 def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
-    solve = CausalSolver.__call__
+    """Each solved frame waits for the solve in progress at most, then its own: its latency is within two solves'
+    time (measured in the same run, so that a machine busy with other work slows both alike)."""
+    solve, solves_ms = CausalSolver.__call__, []
 
     def slow(self, people, now):
+        begin = time.perf_counter()
         time.sleep(0.06)
-        return solve(self, people, now)
+        out = solve(self, people, now)
+        solves_ms.append(1000 * (time.perf_counter() - begin))
+        return out
 
     monkeypatch.setattr(CausalSolver, "__call__", slow)
     report = live(LiveConfig(CLIP, realtime=True, progress=False))
     assert report.read == 100 and report.solved + report.dropped == 100
     assert 15 <= report.solved <= 40, report.summary()
-    assert np.percentile(report.latency_ms, 95) < 250, report.summary()  # each frame waits for one solve at most
+    limit = 2.5 * np.percentile(solves_ms, 95)
+    assert np.percentile(report.latency_ms, 95) <= limit, (report.summary(), limit)
 
 
 # -- the command ------------------------------------------------------------------------------------------------------
