@@ -304,10 +304,11 @@ def main():
             begin = time.perf_counter()
             with tempfile.TemporaryDirectory() as work:
                 work = Path(work)
+                source = video
                 if kind is not None:
                     person_x = float(np.median(motions[view]["camera_trans"][motions[view]["valid"], 0]))
-                    video = write_variant(views[view], kind, work / "variant.mp4", person_x)
-                stages = run_stages(video, work / "run")
+                    source = write_variant(video, kind, work / "variant.mp4", person_x)
+                stages = run_stages(source, work / "run")
             results[name] = report_view(name, stages, variant_reference(reference, kind)) | {
                 "seconds": time.perf_counter() - begin}
             print(f"{name}: {time.perf_counter() - begin:.0f} s", flush=True)

@@ -129,9 +129,7 @@ def _prior_blocks(pose, betas, camera, problem: Problem, config: SolverConfig) -
     moves by ``J_l(theta)^-1 dphi``, so a joint's diagonal block ``D`` becomes ``J_l^-T D J_l^-1``."""
     gradient, hessian = prior_quadratic(pose, betas, camera, problem, config)
     to_theta = mat3.inverse(jnp.transpose(mat3.left_jacobian(pose), (1, 2, 0)))  # (3, 3, 55)
-    weight = hessian.pose_rotvecs.T
-    pose_block = jnp.stack([jnp.stack([jnp.sum(to_theta[:, a] * weight * to_theta[:, b], 0) for b in range(3)])
-                            for a in range(3)])
+    pose_block = mat3.matmul(jnp.swapaxes(to_theta, 0, 1), hessian.pose_rotvecs.T[:, None] * to_theta)
     c = camera.shape[0]
     return (gradient._replace(pose_rotvecs=mat3.matvec_t(to_theta, gradient.pose_rotvecs.T).T),
             Blocks(pose_block, hessian.betas, jnp.zeros((c, c), camera.dtype)))
