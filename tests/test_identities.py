@@ -66,3 +66,26 @@ def test_state_carries_the_tracks_over():
     assert a == b == first + [2]
     for key, value in original.state().items():
         np.testing.assert_array_equal(value, restored.state()[key], err_msg=key)
+
+
+def test_a_person_the_detector_follows_keeps_their_id_however_the_landmarks_jump():
+    """A person cut by the frame's edge whom the landmark model lays down in one frame and stands up in the next
+    (their landmarks jump by a body's length): the same detector track keeps the id; told nothing of the detector's
+    tracks, the tracker takes the lying one for someone new."""
+    rng = np.random.default_rng(6)
+    standing = person(rng, (300, 300))
+    lying = np.concatenate([standing[:, [1, 0]] + (150, 0), standing[:, 2:]], axis=1)  # 180 px wide, 80 high
+    for sources, expected in (([7], [0, 0, 0]), (None, [0, 1, 0])):
+        tracker = IdentityTracker()
+        ids = [tracker(lm[None], LOOKS[:1], sources)[0] for lm in (standing, lying, standing)]
+        assert ids == expected, sources
+
+
+def test_a_track_is_as_large_as_its_person_lying_or_standing():
+    """The gate scales with the person's larger side: lying down (180 px wide, 80 high), a person who shifts by
+    10 px a frame this way and that is the same person (a third of the gate by their height)."""
+    rng = np.random.default_rng(7)
+    lying = person(rng, (300, 300))[:, [1, 0, 2]]
+    tracker = IdentityTracker()
+    ids = [tracker((lying + (10 * (-1) ** t, 10 * (-1) ** (t // 2), 0))[None], LOOKS[:1])[0] for t in range(10)]
+    assert ids == [0] * 10

@@ -16,6 +16,9 @@ from .ssd import Detection, in_image, square_tiles
 
 SIDES = ("left", "right")
 SEARCH_SECONDS = 0.2  # while fewer than max_people are tracked, the person detector looks for more this often
+BONES = np.array([(11, 13), (13, 15), (12, 14), (14, 16), (11, 12), (23, 24), (11, 23), (12, 24), (23, 25),
+                  (25, 27), (24, 26), (26, 28), (0, 11), (0, 12)])  # BlazePose landmarks: arms, torso, legs, head
+CONFIRM_FRAMES = 2  # a person found beside others is reported once tracked in this many frames
 
 
 def search_interval(fps: float | None) -> int:
@@ -33,7 +36,9 @@ class Person:
     ``body`` (33, 4) BlazePose landmarks x, y, z, visibility; ``body_world`` (33, 3) metres about the hips;
     ``left_hand`` / ``right_hand`` (21, 3) x, y, z in OpenPose hand order, or None when not found, with
     ``*_hand_world`` (21, 3) metres and ``*_hand_score`` the hand presence (0 when missing); ``box`` the body's
-    pixel box (x0, y0, x1, y1) from its landmarks; ``*_hand_box`` the hand's, or None; ``score`` the pose presence.
+    pixel box (x0, y0, x1, y1) from its landmarks; ``*_hand_box`` the hand's, or None; ``score`` the pose presence;
+    ``track`` the detector's track of the person (in tracking mode the same number for as long as it follows them
+    from frame to frame, new numbers for people found anew; -1 for still images).
     """
 
     body: np.ndarray
@@ -48,6 +53,7 @@ class Person:
     left_hand_box: np.ndarray | None
     right_hand_box: np.ndarray | None
     score: float
+    track: int = -1
 
 
 def as_bgr(image: np.ndarray) -> np.ndarray:
@@ -72,7 +78,8 @@ def as_bgr(image: np.ndarray) -> np.ndarray:
 class _Track:
     pose: PoseResult
     hands: dict  # side -> HandResult | None
-    seen: int = 2  # frames tracked, 2 for one reported at once; a person is reported once seen in two frames
+    seen: int = CONFIRM_FRAMES  # frames tracked (`CONFIRM_FRAMES` for one reported at once)
+    number: int = -1  # the detector's count of tracks started before this one (`Person.track`)
 
 
 class Detector:
@@ -105,17 +112,21 @@ class Detector:
                                     paths["hand_recrop.tflite"], num_threads) if hands else None
         self._tracks: list[_Track] = []
         self._frame = 0
+        self._started = 0  # tracks started
 
     def reset(self) -> None:
         """Forget the tracked people (start of a new video)."""
         self._tracks = []
         self._frame = 0
+        self._started = 0
 
     def state(self) -> dict[str, np.ndarray]:
         """The tracked people as arrays (``np.savez``-able); `restore` continues from them exactly as this
         detector would (a resumed run detects as an uninterrupted one)."""
         hands = [[t.hands.get(side) for side in SIDES] for t in self._tracks]
-        out = {"frame": np.asarray(self._frame), "seen": np.asarray([t.seen for t in self._tracks], np.int64),
+        out = {"frame": np.asarray(self._frame), "started": np.asarray(self._started),
+               "seen": np.asarray([t.seen for t in self._tracks], np.int64),
+               "number": np.asarray([t.number for t in self._tracks], np.int64),
                "hand_found": np.asarray(
             [[h is not None for h in pair] for pair in hands], bool).reshape(-1, 2)}
         for kind, results, empty in (("pose", [t.pose for t in self._tracks], None),
@@ -135,8 +146,8 @@ class Detector:
         found = state["hand_found"]
         self._tracks = [_Track(result("pose", PoseResult, k), {
             side: result("hand", HandResult, 2 * k + j) if found[k, j] else None for j, side in enumerate(SIDES)},
-            int(state["seen"][k])) for k in range(len(found))]
-        self._frame = int(state["frame"])
+            int(state["seen"][k]), int(state["number"][k])) for k in range(len(found))]
+        self._frame, self._started = int(state["frame"]), int(state["started"])
 
     # -- body -------------------------------------------------------------------------------------------------
     def _person_detections(self, image: np.ndarray) -> list[Detection]:
@@ -166,20 +177,22 @@ class Detector:
         return found[len(known):]
 
     def _people(self, image: np.ndarray) -> list[_Track]:
+        size = (image.shape[1], image.shape[0])
         if self.static_image_mode:
             return [_Track(p, {s: None for s in SIDES}) for p in self._detect_people(image, [])]
         tracks = []
         for track in self._tracks:
             result = self._pose.landmarks(image, track.pose.next_roi, self.min_tracking_confidence)
-            if result is None or any(rect_iou(result.next_roi, t.pose.next_roi) > 0.5 for t in tracks):
+            if result is None or any(_coincide(result, t.pose, size) for t in tracks):
                 continue
-            tracks.append(_Track(result, track.hands, track.seen + 1))
+            tracks.append(_Track(result, track.hands, track.seen + 1, track.number))
         if not tracks or (len(tracks) < self.max_people and self._frame % self.redetect_every == 0):
             new = self._detect_people(image, [t.pose for t in tracks])
-            # the first person of a stream is reported at once; anyone found beside others once seen again (a
-            # detection that does not survive one frame of tracking is a false one, often a part of someone)
-            tracks += [_Track(p, {s: None for s in SIDES}, 2 if not tracks and k == 0 else 1)
-                       for k, p in enumerate(new)]
+            # the first person of a stream is reported at once; anyone found beside others once tracked in
+            # `CONFIRM_FRAMES` frames (a detection that does not survive them is a false one, often a part of someone)
+            tracks += [_Track(p, {s: None for s in SIDES}, CONFIRM_FRAMES if not tracks and k == 0 else 1,
+                              self._started + k) for k, p in enumerate(new)]
+            self._started += len(new)
         return tracks
 
     # -- hands ------------------------------------------------------------------------------------------------
@@ -262,14 +275,37 @@ class Detector:
             self._tracks = tracks
             self._frame += 1
         size = (image.shape[1], image.shape[0])
-        return [_person(t, size) for t in tracks if t.seen >= 2]
+        return [_person(t, size) for t in tracks if t.seen >= CONFIRM_FRAMES]
+
+
+def _coincide(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
+    """Whether ``new`` is ``known``'s pose again: their tracking rects overlap (IoU above 0.5), or ``new`` lies on
+    ``known``'s body (`_on_body`)."""
+    return rect_iou(new.next_roi, known.next_roi) > 0.5 or _on_body(new, known, size)
+
+
+def _on_body(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
+    """Whether most (60%) of ``new``'s visible landmarks lie within a quarter of ``known``'s torso of its skeleton
+    (`BONES`): a second skeleton the landmark model laid over one person (their upper body taken for a whole
+    person, or a deep bend), 81-100% on the clips' crops. Two people, however they overlap, stay below 31% (the
+    two-person take, mirrored, rotated, cropped): one's visible landmarks are where the other does not hide them."""
+    scale = np.asarray(size, np.float64)
+    points = new.landmarks[:, :2] * scale
+    visible = new.landmarks[:, 3] >= 0.5
+    points = points[visible] if visible.sum() >= 4 else points
+    skeleton = known.landmarks[:, :2] * scale
+    torso = np.linalg.norm(skeleton[[11, 12]].mean(0) - skeleton[[23, 24]].mean(0))
+    start, bone = skeleton[BONES[:, 0]], skeleton[BONES[:, 1]] - skeleton[BONES[:, 0]]
+    along = np.clip(np.einsum("pbk,bk->pb", points[:, None] - start, bone) / np.maximum(np.sum(bone**2, 1), 1e-9),
+                    0.0, 1.0)
+    distance = np.linalg.norm(points[:, None] - (start + along[..., None] * bone), axis=2).min(1)
+    return bool(np.mean(distance < 0.25 * torso) >= 0.6)
 
 
 def _same_person(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
-    """Whether a person just found is one already known: their tracking rects overlap (IoU above 0.5), or the new
-    one is a part of the known one taken for a small whole person (less than half as tall, and for the most part
-    within the known one's rect)."""
-    if rect_iou(new.next_roi, known.next_roi) > 0.5:
+    """Whether a person just found is one already known (`_coincide`), or a part of the known one taken for a
+    small whole person (less than half as tall, and for the most part within the known one's rect)."""
+    if _coincide(new, known, size):
         return True
     x0, y0, x1, y1 = box = landmark_box(new.landmarks, size)
     tall = landmark_box(known.landmarks, size)
@@ -305,5 +341,5 @@ def _person(track: _Track, size: tuple[int, int]) -> Person:
         left_hand_world=parts["left"][1], right_hand_world=parts["right"][1],
         left_hand_score=parts["left"][2], right_hand_score=parts["right"][2],
         box=landmark_box(track.pose.landmarks, size), left_hand_box=parts["left"][3],
-        right_hand_box=parts["right"][3], score=track.pose.presence)
+        right_hand_box=parts["right"][3], score=track.pose.presence, track=track.number)
 

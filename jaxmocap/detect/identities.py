@@ -1,5 +1,6 @@
 """Stable identities for the people of a video. Each frame's people are matched to the tracks of the frames before
-by where their body landmarks are expected (a constant-velocity model of each track) and by how they look (a colour
+by the detector's own tracking (a person it followed from the previous frame keeps their identity), else by where
+their body landmarks are expected (a constant-velocity model of each track) and by how they look (a colour
 histogram of the torso); a track unseen for up to ``max_gap`` frames is kept, predicted forward, to be
 re-identified when its person comes back. Ids are 0-based in order of first appearance."""
 
@@ -18,16 +19,17 @@ MIN_VISIBILITY = 0.5
 @dataclass(frozen=True)
 class Track:
     """One identity: its body landmarks where last seen (pixels, visibility), the velocity of their centre
-    (pixels per frame), the person's height (pixels), the torso's colour histogram, the frame last seen, and
-    how many frames it was seen in."""
+    (pixels per frame), the person's size (`_size`, pixels), the torso's colour histogram, the frame last seen, how
+    many frames it was seen in, and the detector's track it was last seen as (`Person.track`, -1 unknown)."""
 
     id: int
     landmarks: np.ndarray  # (K, 3) x, y, visibility
     velocity: np.ndarray  # (2,)
-    height: float
+    size: float
     appearance: np.ndarray  # (D,) L1-normalised histogram, zeros when unknown
     last_seen: int
     seen: int
+    source: int = -1
 
 
 def appearance(image: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
@@ -53,14 +55,14 @@ def identify(tracker: "IdentityTracker | None", image: np.ndarray, people: list)
     if not people:
         return tracker(np.zeros((0, 33, 3)), np.zeros((0, APPEARANCE_SIZE), np.float32))
     landmarks = np.stack([p.body[:, [0, 1, 3]] for p in people])
-    return tracker(landmarks, np.stack([appearance(image, p.body) for p in people]))
+    return tracker(landmarks, np.stack([appearance(image, p.body) for p in people]), [p.track for p in people])
 
 
 def landmark_distance(track: Track, landmarks: np.ndarray, frame: int) -> float:
-    """Mean distance, in the track's heights, of the landmarks seen in both from where the track expects them."""
+    """Mean distance, in the track's sizes, of the landmarks seen in both from where the track expects them."""
     both = _seen_in_both(track.landmarks, landmarks)
     expected = track.landmarks[both, :2] + track.velocity * (frame - track.last_seen)
-    return float(np.linalg.norm(expected - landmarks[both, :2], axis=1).mean() / max(track.height, 1.0))
+    return float(np.linalg.norm(expected - landmarks[both, :2], axis=1).mean() / max(track.size, 1.0))
 
 
 def appearance_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -71,9 +73,12 @@ def appearance_distance(a: np.ndarray, b: np.ndarray) -> float:
 
 
 class IdentityTracker:
-    """``ids = tracker(landmarks, appearances)`` once per frame, for that frame's people: ``landmarks`` (P, K, 3)
-    pixels and visibility, ``appearances`` (P, D) (`appearance`). A person matches the track whose expected
-    landmarks lie within ``gate`` heights (widening with the frames it was unseen) and whose look is within
+    """``ids = tracker(landmarks, appearances, sources)`` once per frame, for that frame's people: ``landmarks``
+    (P, K, 3) pixels and visibility, ``appearances`` (P, D) (`appearance`), ``sources`` (P,) the detector's tracks
+    (`Person.track`; -1 or None: unknown). A person the detector tracked from the previous frame keeps that frame's
+    identity: its landmark model follows them however their landmarks jump (a person cut by the frame's edge, whom
+    it lays down in one frame and stands up in the next). Any other person matches the track whose expected
+    landmarks lie within ``gate`` sizes (widening with the frames it was unseen) and whose look is within
     ``max_appearance``; among candidates the cheapest pairs go first (distance + look). ``state``/``restore``
     carry the tracks over (e.g. between the chunks of a resumable run)."""
 
@@ -85,10 +90,12 @@ class IdentityTracker:
         self.frame = 0
         self.next_id = 0
 
-    def __call__(self, landmarks: np.ndarray, appearances: np.ndarray) -> list[int]:
+    def __call__(self, landmarks: np.ndarray, appearances: np.ndarray, sources=None) -> list[int]:
         frame = self.frame
         live = [t for t in self.tracks if frame - t.last_seen <= self.max_gap]
-        pairs = []
+        sources = [-1] * len(landmarks) if sources is None else list(sources)
+        followed = {t.source: k for k, t in enumerate(live) if t.source >= 0 and t.last_seen == frame - 1}
+        pairs = [(-1.0, p, followed[s]) for p, s in enumerate(sources) if s in followed]
         for p, (lm, look) in enumerate(zip(landmarks, appearances)):
             for k, track in enumerate(live):
                 gap = frame - track.last_seen
@@ -99,12 +106,12 @@ class IdentityTracker:
         ids, used = [None] * len(landmarks), set()
         for _, p, k in sorted(pairs):
             if ids[p] is None and k not in used:
-                ids[p], live[k] = live[k].id, _updated(live[k], landmarks[p], appearances[p], frame)
+                ids[p], live[k] = live[k].id, _updated(live[k], landmarks[p], appearances[p], frame, sources[p])
                 used.add(k)
         for p in range(len(landmarks)):
             if ids[p] is None:
                 ids[p] = self.next_id
-                live.append(_new_track(self.next_id, landmarks[p], appearances[p], frame))
+                live.append(_new_track(self.next_id, landmarks[p], appearances[p], frame, sources[p]))
                 self.next_id += 1
         self.tracks, self.frame = live, frame + 1
         return ids
@@ -132,25 +139,28 @@ def _scalar(value):
     return value.item() if np.ndim(value) == 0 else value
 
 
-def _height(landmarks: np.ndarray) -> float:
+def _size(landmarks: np.ndarray) -> float:
+    """The larger side of the box of the visible landmarks: a person's height, or their length when the landmark
+    model lays them down (someone cut by the frame's edge)."""
     seen = landmarks[landmarks[:, 2] >= MIN_VISIBILITY, :2]
     seen = seen if len(seen) >= 2 else landmarks[:, :2]
-    return float(seen[:, 1].max() - seen[:, 1].min())
+    return float(np.max(seen.max(0) - seen.min(0)))
 
 
-def _new_track(track_id: int, landmarks: np.ndarray, look: np.ndarray, frame: int) -> Track:
-    return Track(track_id, np.asarray(landmarks, np.float64), np.zeros(2), max(_height(landmarks), 1.0),
-                 np.asarray(look, np.float32), frame, 1)
+def _new_track(track_id: int, landmarks: np.ndarray, look: np.ndarray, frame: int, source: int) -> Track:
+    return Track(track_id, np.asarray(landmarks, np.float64), np.zeros(2), max(_size(landmarks), 1.0),
+                 np.asarray(look, np.float32), frame, 1, int(source))
 
 
-def _updated(track: Track, landmarks: np.ndarray, look: np.ndarray, frame: int) -> Track:
-    """The track after seeing its person at ``frame``: velocity and height smoothed, appearance a running mean."""
+def _updated(track: Track, landmarks: np.ndarray, look: np.ndarray, frame: int, source: int) -> Track:
+    """The track after seeing its person at ``frame``: velocity and size smoothed, appearance a running mean."""
     seen = _seen_in_both(track.landmarks, landmarks)
     step = (landmarks[seen, :2].mean(0) - track.landmarks[seen, :2].mean(0)) / (frame - track.last_seen)
     velocity = step if track.seen == 1 else 0.5 * track.velocity + 0.5 * step
-    height = 0.8 * track.height + 0.2 * max(_height(landmarks), 1.0)
+    size = 0.8 * track.size + 0.2 * max(_size(landmarks), 1.0)
     look = np.asarray(look, np.float32)
     weight = 1.0 / min(track.seen + 1, 30)
     mixed = look if not track.appearance.any() else track.appearance if not look.any() else (
         (1 - weight) * track.appearance + weight * look)
-    return Track(track.id, np.asarray(landmarks, np.float64), velocity, height, mixed, frame, track.seen + 1)
+    return Track(track.id, np.asarray(landmarks, np.float64), velocity, size, mixed, frame, track.seen + 1,
+                 int(source))
