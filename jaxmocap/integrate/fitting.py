@@ -162,10 +162,10 @@ def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXPara
 
 
 @functools.partial(jax.jit, static_argnames=("config", "fixed_shape"))
-def _fit_batch(km, keypoints, pose, betas, camera, lens, config: FitConfig, fixed_shape: bool = False):
+def _fit_batch(km, keypoints, pose, betas, camera, free, lens, config: FitConfig, fixed_shape: bool = False):
     one = functools.partial(fit_one, config=config, fit_betas=jnp.zeros((), pose.dtype) if fixed_shape else None)
-    return jax.vmap(one, in_axes=(None, 0, 0, 0, None if camera is None else 0, None))(km, keypoints, pose, betas,
-                                                                                       camera, lens)
+    return jax.vmap(lambda k, p, b, c, f: one(km, k, p, b, c, lens, free=f),
+                    in_axes=(0, 0, 0, None if camera is None else 0, 0))(keypoints, pose, betas, camera, free)
 
 
 def full_pose_of(params: SMPLXParams) -> Float[Array, "T 55 3"]:
@@ -189,9 +189,10 @@ def _check(name, value, shape, dtype):
 
 def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_scale=None, camera_trans=None, *,
         focal_length: float | None = None, principal_point=None, iterations: int = 20,
-        config: FitConfig | None = None, fixed_shape: bool = False, progress=None) -> FitResult:
+        config: FitConfig | None = None, fixed_shape: bool = False, free_joints=None, progress=None) -> FitResult:
     """Fit every frame of ``keypoints (T, 67, 3)`` (`fit_frame` vmapped). ``init``: batched `SMPLXParams` (T leading),
-    default `default_pose` with mean shape; ``fixed_shape``: keep ``init.betas`` (fit pose and camera). Camera: given
+    default `default_pose` with mean shape; ``fixed_shape``: keep ``init.betas`` (fit pose and camera);
+    ``free_joints`` (T, 55) bool: the joints each frame fits (the others keep ``init``'s; default all). Camera: given
     (both arrays), or fitted to the start; a pinhole of ``focal_length`` and ``principal_point`` or weak perspective
     (`fit_frame`). ``progress(n)`` is called after each chunk with the number of frames done. Runs in the model's
     precision (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64).
@@ -213,6 +214,7 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
     if camera_scale is not None:
         camera = np.concatenate([_check("camera_scale", camera_scale, (t,), dtype)[:, None],
                                  _check("camera_trans", camera_trans, (t, 2), dtype)], axis=1)
+    free = np.ones((t, 55), dtype) if free_joints is None else _check("free_joints", free_joints, (t, 55), dtype)
     km = openpose_keypoint_model(model)
     lens = lens_arrays(focal_length, principal_point, dtype)
 
@@ -224,7 +226,7 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
             progress(n)
         return out
 
-    return map_in_buckets(fit_chunk, (keypoints, pose, betas, camera), BUCKETS)
+    return map_in_buckets(fit_chunk, (keypoints, pose, betas, camera, free), BUCKETS)
 
 
 __all__ = ["BUCKETS", "FitConfig", "FitResult", "default_pose", "fit", "fit_frame", "openpose_keypoint_model"]

@@ -28,6 +28,7 @@ from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore
+from jaxmocap.pipeline.coherent import coherent
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
@@ -48,7 +49,7 @@ from jaxmocap.pipeline.stages import (
 )
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
-SETTINGS_VERSION = 5  # of the stored chunks: bump when what a chunk holds changes
+SETTINGS_VERSION = 6  # of the stored chunks: bump when what a chunk holds changes
 
 
 @dataclass(frozen=True)
@@ -109,9 +110,13 @@ def run(config: RunConfig, out_dir, observed: Observer | None = None) -> RunRepo
         video = inputs.media.kind in ("video", "webcam")
         tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
                                     config.max_people)
-        tracks = {i: dataclasses.replace(t, bodies=one_shape(inputs.model, t.bodies, t.keypoints_2d, inputs.lens,
-                                                             *shape_fit(config, inputs)))
-                  for i, t in tracks.items()}
+        refit = shape_fit(config, inputs)
+
+        def person_bodies(track):
+            bodies = one_shape(inputs.model, track.bodies, track.keypoints_2d, inputs.lens, *refit)
+            return coherent(inputs.model, bodies, track.keypoints_2d, inputs.lens, *refit) if video else bodies
+
+        tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
     with chrono("smooth"):
         if config.smooth:
             tracks = {i: dataclasses.replace(t, bodies=smoothed(inputs.model, t.bodies, t.keypoints_2d, inputs.lens))

@@ -1,8 +1,8 @@
 """The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector, each person by identity) ->
 for each person `initial_bodies` (IK from the 3D landmarks) -> `fitted_bodies` (the fit to the 2D keypoints); with
 FrankMocap's weights the regressors (`regress.regressed_bodies`) stand in for the middle two. Over the whole
-sequence, for each person (split tracks joined: `merge_tracks`): `one_shape` -> `smoothed` -> `motion_arrays` (what
-``motion.npz`` holds); then the outputs (`outputs`)."""
+sequence, for each person (split tracks joined: `merge_tracks`): `one_shape` -> in a video `coherent.coherent` (one
+facing through time) -> `smoothed` -> `motion_arrays` (what ``motion.npz`` holds); then the outputs (`outputs`)."""
 
 import dataclasses
 
