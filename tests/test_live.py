@@ -234,7 +234,8 @@ def test_live_agrees_with_the_offline_run(played, tmp_path):
 
 def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
     """Each solved frame waits for the solve in progress at most, then its own: its latency is within two solves'
-    time (measured in the same run, so that a machine busy with other work slows both alike)."""
+    time, and the solver is never idle while frames come, so it solves about as many as the stream's 1.67 s hold
+    solves (both measured in the same run, so that a machine busy with other work slows them alike)."""
     solve, solves_ms = CausalSolver.__call__, []
 
     def slow(self, people, now):
@@ -247,7 +248,7 @@ def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
     monkeypatch.setattr(CausalSolver, "__call__", slow)
     report = live(LiveConfig(CLIP, realtime=True, progress=False))
     assert report.read == 100 and report.solved + report.dropped == 100
-    assert 15 <= report.solved <= 40, report.summary()
+    assert 0.6 * 1000 * 100 / 60 / np.mean(solves_ms) <= report.solved <= 40, (report.summary(), np.mean(solves_ms))
     limit = 2.5 * np.percentile(solves_ms, 95)
     assert np.percentile(report.latency_ms, 95) <= limit, (report.summary(), limit)
 
