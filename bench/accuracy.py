@@ -98,12 +98,11 @@ def score(joints: np.ndarray, reference: np.ndarray) -> tuple[Score, np.ndarray]
 def rotation_changes_deg(global_orient: np.ndarray, body_pose: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Angle between consecutive frames' rotations of the global orientation and the 21 body joints, degrees,
     over consecutive valid frames: ``(pairs, 22)``."""
-    from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
+    from jaxmocap.pipeline.coherent import body_rotmats, turns_deg
 
-    rot = np.asarray(rotvec_to_rotmat(np.concatenate([global_orient[:, None], body_pose], 1)))
+    rot = body_rotmats(global_orient, body_pose)
     pairs = np.flatnonzero(valid[:-1] & valid[1:])
-    relative = np.einsum("tjik,tjil->tjkl", rot[pairs], rot[pairs + 1])  # R_t^T R_t+1
-    return np.degrees(np.linalg.norm(np.asarray(rotmat_to_rotvec(relative)), axis=-1))
+    return turns_deg(rot[pairs], rot[pairs + 1])
 
 
 def rotation_coherence(motion: dict) -> dict:

@@ -8,8 +8,6 @@ A turn the image demands (the refit reprojects farther) stays. (Letting refits r
 cam01 from 61.0 to 63.8-65.2 mm PA-MPJPE: poses the image does not support.)
 """
 
-import dataclasses
-
 import jax
 import numpy as np
 
@@ -19,22 +17,20 @@ from jaxmocap.integrate import FitConfig, fit
 from jaxmocap.integrate.fitting import BUCKETS
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.pipeline.records import Bodies
-from smplx_jax.rotations import rotvec_to_rotmat
+from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
 TURN_DEG = 45.0  # a body joint turning more than this from one frame to the next
 WRISTS = (20, 21)  # SMPL-X joints
 
 
-def body_rotmats(params: smplx_jax.SMPLXParams) -> np.ndarray:
-    """``(T, 22, 3, 3)``: the global orientation and the 21 body joints' rotations."""
-    rotvecs = np.concatenate([np.asarray(params.global_orient)[:, None], np.asarray(params.body_pose)], 1)
-    return np.array(rotvec_to_rotmat(rotvecs))
+def body_rotmats(global_orient: np.ndarray, body_pose: np.ndarray) -> np.ndarray:
+    """``(T, 22, 3, 3)``: the global orientation ``(T, 3)`` and the 21 body joints' rotations ``(T, 21, 3)``."""
+    return np.array(rotvec_to_rotmat(np.concatenate([np.asarray(global_orient)[:, None], np.asarray(body_pose)], 1)))
 
 
 def turns_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``(22,)`` the angle, degrees, between each joint's rotations ``a`` and ``b`` (22, 3, 3)."""
-    cos = (np.einsum("jik,jik->j", a, b) - 1.0) / 2.0
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    """``(..., J)`` the angle, degrees, between each joint's rotations ``a`` and ``b`` ``(..., J, 3, 3)``."""
+    return np.degrees(np.linalg.norm(np.asarray(rotmat_to_rotvec(np.swapaxes(a, -1, -2) @ b)), axis=-1))
 
 
 def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.ndarray, size: int):
@@ -62,8 +58,8 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
     if config is None or len(frames) < 2:
         return bodies
     size = bucket_size(min(len(bodies.valid), BUCKETS[-1]), BUCKETS)
-    rotmats = body_rotmats(bodies.params)
-    turns = np.array([turns_deg(rotmats[a], rotmats[b]).max() for a, b in zip(frames[:-1], frames[1:])])
+    rotmats = body_rotmats(bodies.params.global_orient, bodies.params.body_pose)
+    turns = turns_deg(rotmats[frames[:-1]], rotmats[frames[1:]]).max(1)
     runs = np.split(np.arange(len(frames)), np.flatnonzero(turns > TURN_DEG) + 1)
     if len(runs) == 1:
         return bodies
@@ -86,5 +82,5 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
                                     np.repeat(keypoints_2d[k:k + 1], size, 0), *lens)[0]
         if bool(result.valid[0]) and error <= errors[k]:
             out = jax.tree.map(lambda a, b: np.concatenate([a[:k], b[:1], a[k + 1:]]), out, refit)
-            rotmats[k] = body_rotmats(jax.tree.map(lambda a: a[:1], refit.params))[0]
-    return dataclasses.replace(out, valid=bodies.valid)
+            rotmats[k] = body_rotmats(refit.params.global_orient[:1], refit.params.body_pose[:1])[0]
+    return out
