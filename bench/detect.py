@@ -1,11 +1,15 @@
-"""Detector speed in tracking (video) mode, ours vs official mediapipe 0.10.21, on the bundled Pose2Sim clip.
+"""Detector speed in tracking (video) mode, ours vs official mediapipe 0.10.21, on the bundled Pose2Sim clip;
+and agreement on still images (`STILLS`: frames of the clips the tests do not compare, as shot and mirrored).
 
     python bench/detect.py [--out bench/results] [--quick] [--frames N] [--mediapipe-python PATH]
 
 Ours: ``jaxmocap.detect.Detector(static_image_mode=False)`` (pose + hands, LiteRT, 2 threads). Peer: the legacy
 ``mp.solutions.holistic.Holistic`` (pose + hands, face off is impossible in legacy holistic, so also
 ``mp.solutions.pose`` + ``mp.solutions.hands`` run one after the other), in the mediapipe venv as a subprocess, same
-frames, same machine, same run. Prints a table and writes ``<out>/detect.json``.
+frames, same machine, same run. Stills: ``Detector(static_image_mode=True)`` (one person, bodies) against the
+legacy ``mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1)`` on the same images: the pixel
+distance of the 33 landmarks (median over all points, and each image's median), images where only one of the two
+finds a person. Prints tables and writes ``<out>/detect.json``.
 
 The peer needs an environment of its own, outside the clone (mediapipe 0.10.21 pins numpy<2 and cannot share
 jaxmocap's): ``python3 -m venv ~/venvs/mediapipe && ~/venvs/mediapipe/bin/pip install mediapipe==0.10.21``, then
@@ -21,8 +25,11 @@ import os
 import platform
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 CLIP = ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -79,11 +86,70 @@ def mediapipe_python(given: str | None) -> str | None:
     return str(path)
 
 
-def run_peer(peer_python: str | None, script: str, clip: Path, frames: int) -> dict:
-    """The peer's JSON result of ``script`` on ``frames`` frames of ``clip`` in the mediapipe Python; without it,
-    or when it fails (a line says why), no results."""
+PEER_STILLS = r"""
+import json, sys, cv2, numpy as np, mediapipe as mp
+out = {}
+with mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1) as pose:
+    for path in sys.argv[1:]:
+        bgr = cv2.imread(path); h, w = bgr.shape[:2]
+        res = pose.process(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+        out[path] = None if res.pose_landmarks is None else [
+            [lm.x * w, lm.y * h] for lm in res.pose_landmarks.landmark]
+print(json.dumps({"version": mp.__version__, "results": out}))
+"""
+# (clip, frames): the single-person take's other view and the two-person take, none of them compared in the tests
+STILLS = (("pose2sim_single_cam03.mp4", (0, 30, 60, 90)), ("pose2sim_multi_cam01.mp4", (0, 50, 99)))
+
+
+def write_stills(folder: Path) -> list[Path]:
+    """`STILLS` as JPEG files in ``folder``, each also mirrored."""
+    import cv2
+
+    paths = []
+    for clip, indices in STILLS:
+        cap = cv2.VideoCapture(str(ROOT / "tests" / "data" / clip))
+        for index in indices:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+            ok, frame = cap.read()
+            if not ok:
+                raise SystemExit(f"bench/detect.py: cannot read frame {index} of {clip}")
+            for name, image in ((f"{Path(clip).stem}_f{index:03d}", frame),
+                                (f"{Path(clip).stem}_f{index:03d}_mirror", frame[:, ::-1])):
+                paths.append(folder / f"{name}.jpg")
+                cv2.imwrite(str(paths[-1]), np.ascontiguousarray(image), [cv2.IMWRITE_JPEG_QUALITY, 95])
+    return paths
+
+
+def compare_stills(paths: list[Path], peer: dict) -> dict:
+    """Ours against the peer's landmarks on each still (as the file reads back: both decode the same JPEG)."""
+    import cv2
+
+    from jaxmocap.detect import Detector
+
+    detector = Detector(static_image_mode=True, hands=False)
+    images, distances, missed = {}, [], []
+    for path in paths:
+        people = detector(cv2.imread(str(path)))
+        theirs = peer["results"].get(str(path))
+        if (theirs is None) != (not people):
+            missed.append(path.name)
+            continue
+        if theirs is None:
+            continue
+        d = np.linalg.norm(people[0].body[:, :2] - np.asarray(theirs), axis=1)
+        images[path.name] = float(np.median(d))
+        distances.append(d)
+    all_points = np.concatenate(distances) if distances else np.zeros(0)
+    return {"images": images, "missed": missed, "points": int(all_points.size),
+            "median_px": float(np.median(all_points)) if all_points.size else None,
+            "p90_px": float(np.percentile(all_points, 90)) if all_points.size else None}
+
+
+def run_peer(peer_python: str | None, script: str, *args) -> dict:
+    """The peer's JSON result of ``script`` with ``args`` in the mediapipe Python; without it, or when it fails (a
+    line says why), no results."""
     if peer_python is not None:
-        proc = subprocess.run([peer_python, "-c", script, str(clip), str(frames)], capture_output=True, text=True)
+        proc = subprocess.run([peer_python, "-c", script, *map(str, args)], capture_output=True, text=True)
         if proc.returncode == 0:
             return json.loads(proc.stdout.strip().splitlines()[-1])
         last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
@@ -148,10 +214,24 @@ def main() -> None:
         ms = row["ms_per_frame"]
         ms_text = f"{ms:.1f}" if isinstance(ms, float) else ms
         print(f"{name:<48}{ms_text:>10}{row.get('frames_with_body', ''):>12}{row.get('hands', ''):>13}")
+    stills = None
+    with tempfile.TemporaryDirectory() as folder:
+        paths = write_stills(Path(folder))
+        peer = run_peer(peer_python, PEER_STILLS, *paths)
+        if peer["version"] is not None:
+            stills = compare_stills(paths, peer)
+    if stills is None:
+        print("stills against mediapipe: n/a (no peer)")
+    else:
+        print(f"{len(paths)} stills against mediapipe {peer['version']} (pose, static, complexity 1): median "
+              f"{stills['median_px']:.2f} px over {stills['points']} points, 90th percentile {stills['p90_px']:.2f}"
+              f" px, missed {len(stills['missed'])} {stills['missed']}")
+        for name, px in stills["images"].items():
+            print(f"  {name:<44}{px:>8.2f} px")
     out = args.out / "detect.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"clip": CLIP.name, "frames": len(frames), "cpus": os.cpu_count(), "rows": rows},
-                              indent=1))
+    out.write_text(json.dumps({"clip": CLIP.name, "frames": len(frames), "cpus": os.cpu_count(), "rows": rows,
+                               "stills": stills}, indent=1))
     print(f"wrote {out}")
 
 

@@ -151,15 +151,18 @@ class Detector:
 
     # -- body -------------------------------------------------------------------------------------------------
     def _person_detections(self, image: np.ndarray) -> list[Detection]:
-        """The person detector on the whole (letterboxed) image and on squares along its long side, where people
-        are seen at twice the size or more, best first (duplicates of one person are left to the caller)."""
+        """The person detector on the whole (letterboxed) image, best first, then on squares along its long side,
+        where people are seen at twice the size or more, best first (duplicates of one person are left to the
+        caller). The whole image's come first, as mediapipe takes them: the squares add people, never a crop other
+        than mediapipe's for the first one (ordered by score together, a square's higher score moved it)."""
         size = (image.shape[1], image.shape[0])
-        found = self._pose.detect(image, self.min_detection_confidence)
+        tiles = []
         for x0, y0, side in square_tiles(size):
             tile = image[y0:y0 + side, x0:x0 + side]
-            found += [in_image(d, (x0, y0, side), size)
+            tiles += [in_image(d, (x0, y0, side), size)
                       for d in self._pose.detect(tile, self.min_detection_confidence)]
-        return sorted(found, key=lambda d: -d.score)
+        whole = self._pose.detect(image, self.min_detection_confidence)
+        return sorted(whole, key=lambda d: -d.score) + sorted(tiles, key=lambda d: -d.score)
 
     def _detect_people(self, image: np.ndarray, known: list[PoseResult]) -> list[PoseResult]:
         size = (image.shape[1], image.shape[0])
