@@ -64,7 +64,7 @@ def batch(config: BatchConfig, out_dir) -> BatchReport:
     ``out_dir/batch.json`` (and ``.csv``) up to date as they finish. Videos finished before with the same options
     and inputs are skipped (no Ray is started if none is left)."""
     started = time.perf_counter()
-    out_dir = Path(out_dir)
+    out_dir = Path(out_dir).resolve()  # as the workers find it
     out_dir.mkdir(parents=True, exist_ok=True)
     videos = videos_of(config, out_dir)
     records = {i: r for i, v in enumerate(videos) if (r := finished(v.mark, v.key, v.config.mode)) is not None}
