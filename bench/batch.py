@@ -113,12 +113,16 @@ def main():
                        environment(root / "caches" / "batch", Path(ray_dir)))
         difference = max(max_difference(batch_out / c.stem / "motion.npz", shared_out / c.stem / "motion.npz")
                          for c in clips)
+        written = [p for c in clips for p in (batch_out / c.stem).rglob("*") if p.is_file()]
+        storage = dict(bytes_per_frame=sum(p.stat().st_size for p in written) / total,
+                       files_per_frame=len(written) / total)
 
     for row in rows:
         row |= dict(frames=total, fps=total / row["seconds"], videos_per_hour=3600 * len(clips) / row["seconds"])
     by_arm = {r["arm"]: r for r in rows}
     result = dict(benchmark="batch", cpus=os.cpu_count(), machine=platform.machine(), clips=[c.name for c in clips],
                   frames_per_clip=frames, rows=rows, second_call_seconds=second, max_abs_difference=difference,
+                  storage=storage,
                   throughput_ratio=by_arm["batch, 2 workers"]["fps"] / by_arm["run, shared cache"]["fps"])
     if "run, own caches" in by_arm:
         own, shared = by_arm["run, own caches"]["per_video"], by_arm["run, shared cache"]["per_video"]
@@ -140,6 +144,8 @@ def main():
               f"first ({result['compile_saved_total']:.1f} s over runs 2-4)")
     print(f"second batch call (all finished): {second:.1f} s; batch vs separate runs, max abs difference: "
           f"{difference:.2g}")
+    print(f"written per frame (motions, OpenPose JSON): {storage['bytes_per_frame'] / 1024:.1f} KiB in "
+          f"{storage['files_per_frame']:.2f} files")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "batch.json").write_text(json.dumps(result, indent=2))
     print(f"wrote {args.out / 'batch.json'}")

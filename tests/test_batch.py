@@ -120,8 +120,9 @@ def separate_run(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def local_batch(clips, ray_env, tmp_path_factory):
-    """A batch on a local Ray of two workers: the good clip, the empty file and the corrupt one."""
+def local_batch(clips, ray_env, separate_run, tmp_path_factory):
+    """A batch on a local Ray of two workers: the good clip, the empty file and the corrupt one (after the separate
+    run, whose programs the workers read back from the compile cache instead of both compiling them at once)."""
     out = tmp_path_factory.mktemp("local") / "out"
     env, _ = ray_env
     proc = subprocess.run(jaxmocap("batch", str(clips["good"]), str(clips["empty"]), str(clips["corrupt"]),

@@ -34,7 +34,7 @@ def connect(address: str | None, workers: int | None):
     ray = import_ray()
     if on_this_machine(address) and ray._private.ray_constants.ENABLE_RAY_CLUSTER:
         raise RuntimeError("Ray was imported before jaxmocap could keep it on 127.0.0.1: run batch in a new process")
-    quiet = dict(log_to_driver=False, logging_level=logging.WARNING)
+    quiet = dict(log_to_driver=False, logging_level=logging.ERROR)  # Ray's notes are not the batch's
     if address is None:
         ray.init(num_cpus=workers or os.cpu_count() or 1, include_dashboard=False, **quiet)
     else:
