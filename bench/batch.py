@@ -33,6 +33,7 @@ OPTIONS = ["--no-overlay", "--quiet"]
 
 def write_clips(folder: Path, frames: int) -> list[Path]:
     """Each view as it is and mirrored, its first ``frames`` frames, re-encoded alike (mp4v)."""
+    folder.mkdir(parents=True, exist_ok=True)
     clips = []
     for name, source in VIEWS.items():
         for mirrored in (False, True):
@@ -47,6 +48,8 @@ def write_clips(folder: Path, frames: int) -> list[Path]:
                 writer.write(image[:, ::-1] if mirrored else image)
             writer.release()
             capture.release()
+            if not cv2.VideoCapture(str(path)).isOpened():
+                raise SystemExit(f"could not write {path}")
             clips.append(path)
     return clips
 

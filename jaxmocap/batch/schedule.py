@@ -1,6 +1,7 @@
-"""`batch`: the videos not finished before become Ray tasks (a few in flight at a time), gathered as they finish
-into the ledger; a task whose worker died is retried by Ray (and resumes from its stored chunks); Ctrl-C cancels
-the tasks in flight (each rolls its writes back) and stops Ray."""
+"""`batch`: the videos not finished before become Ray tasks (one until a video is done, so that the programs are
+compiled once; then a few in flight at a time), gathered as they finish into the ledger; a task whose worker died
+is retried by Ray (and resumes from its stored chunks); Ctrl-C cancels the tasks in flight (each rolls its writes
+back) and stops Ray."""
 
 import dataclasses
 import time
@@ -80,7 +81,8 @@ def batch(config: BatchConfig, out_dir) -> BatchReport:
 def solve(config: BatchConfig, out_dir: Path, videos: list[Video], todo: list[int],
           records: dict[int, VideoRecord]) -> None:
     """The ``todo`` videos as Ray tasks, at most ``workers`` in flight; each finished one recorded in ``records``
-    and the ledger rewritten."""
+    and the ledger rewritten. Until one video is done, one runs at a time: its worker compiles the programs and
+    the others read them back from the compile cache, instead of each compiling them at once."""
     from tqdm import tqdm
 
     ray = connect(config.address, config.workers)
@@ -89,7 +91,8 @@ def solve(config: BatchConfig, out_dir: Path, videos: list[Video], todo: list[in
     queue, pending = iter(todo), {}
 
     def submit():
-        for i in islice(queue, max(in_flight - len(pending), 0)):
+        compiled = any(records[i].status == "done" for i in todo if i in records)
+        for i in islice(queue, max((in_flight if compiled else 1) - len(pending), 0)):
             v = videos[i]
             pending[task.remote(v.config, str(v.out), str(v.mark), v.key)] = i, time.perf_counter()
 
