@@ -11,7 +11,7 @@ from pathlib import Path
 
 from jaxmocap.batch.cluster import connect
 from jaxmocap.batch.config import BatchConfig
-from jaxmocap.batch.ledger import VideoRecord, finished, mark_path, one_line, video_key, write_ledger
+from jaxmocap.batch.ledger import VideoRecord, finished, mark_path, video_key, write_ledger
 from jaxmocap.batch.task import run_video
 from jaxmocap.batch.videos import folder_names, resolved
 from jaxmocap.pipeline.config import RunConfig
@@ -81,8 +81,9 @@ def batch(config: BatchConfig, out_dir) -> BatchReport:
 def solve(config: BatchConfig, out_dir: Path, videos: list[Video], todo: list[int],
           records: dict[int, VideoRecord]) -> None:
     """The ``todo`` videos as Ray tasks, at most ``workers`` in flight; each finished one recorded in ``records``
-    and the ledger rewritten. Until one video is done, one runs at a time: its worker compiles the programs and
-    the others read them back from the compile cache, instead of each compiling them at once."""
+    and the ledger rewritten. Until one video is done (now or in an earlier call), one runs at a time: its worker
+    compiles the programs and the others read them back from the compile cache, instead of each compiling them at
+    once."""
     from tqdm import tqdm
 
     ray = connect(config.address, config.workers)
@@ -91,7 +92,7 @@ def solve(config: BatchConfig, out_dir: Path, videos: list[Video], todo: list[in
     queue, pending = iter(todo), {}
 
     def submit():
-        compiled = any(records[i].status == "done" for i in todo if i in records)
+        compiled = any(r.status == "done" for r in records.values())  # here, or before: the cache holds them
         for i in islice(queue, max((in_flight if compiled else 1) - len(pending), 0)):
             v = videos[i]
             pending[task.remote(v.config, str(v.out), str(v.mark), v.key)] = i, time.perf_counter()
@@ -128,8 +129,7 @@ def outcome(ray, ref, video: Video, submitted: float, retries: int) -> VideoReco
     except ray.exceptions.RayError as err:
         lines = [line for line in str(err).splitlines() if line.strip()]
         cause = f"{type(err).__name__}: {lines[-1] if lines else err}"
-    return VideoRecord.failure(str(video.config.source), str(video.out), one_line(cause),
-                               time.perf_counter() - submitted)
+    return VideoRecord.failure(str(video.config.source), str(video.out), cause, time.perf_counter() - submitted)
 
 
 def stop(ray, refs: list) -> list:
