@@ -203,7 +203,8 @@ def _parser() -> argparse.ArgumentParser:
     p = command("batch", help="many videos as Ray tasks -> DIR/<stem>/ each as `run` writes it, DIR/batch.json")
     p.add_argument("inputs", nargs="*", metavar="INPUT", help="video files, image folders or stream URLs")
     p.add_argument("--manifest", type=Path, default=None, metavar="FILE", help="more inputs, one per line")
-    p.add_argument("--out", type=Path, required=True, help="output folder: DIR/<stem>/ per video, DIR/batch.json")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="output folder: DIR/<stem>/ per video, DIR/batch.json")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="videos solved at once (default: this machine's cores; with --address, the cluster's)")
     p.add_argument("--address", default=None, metavar="ADDR",
