@@ -5,6 +5,7 @@ import functools
 import sys
 from pathlib import Path
 
+from jaxmocap.compile_cache import use_compilation_cache
 from jaxmocap.errors import InputError
 
 
@@ -35,17 +36,33 @@ def _print_report(report, hands: bool = False):
         print(f"{len(report.people)} {'hands' if hands else 'people'} tracked: {', '.join(map(str, report.people))}")
 
 
-def _cmd_run(args):
-    from jaxmocap.pipeline import RunConfig, run
+def _run_config(args, source):
+    """The `RunConfig` of ``source`` from `_run_options`' arguments (``run``'s and ``batch``'s)."""
+    from jaxmocap.pipeline import RunConfig
 
-    config = RunConfig(
-        args.input, mode=args.mode, model=args.model, weights=args.weights, integration=args.integration,
+    return RunConfig(
+        source, mode=args.mode, model=args.model, weights=args.weights, integration=args.integration,
         hand_boxes=args.hand_boxes, keypoints=args.keypoints, max_people=args.max_people, max_hands=args.max_hands,
         start=args.start, end=args.end, stride=args.stride, chunk_size=args.chunk,
         iterations=args.iterations, focal_length=args.focal_length, smooth=not args.no_smooth,
         overlay=not args.no_overlay, exports=tuple(f for f in args.export.split(",") if f),
         frankmocap_pkl=args.frankmocap_pkl, save_frames=args.save_frames, progress=not args.quiet)
-    _print_report(run(config, args.out), hands=args.mode == "hands")
+
+
+def _cmd_run(args):
+    from jaxmocap.pipeline import run
+
+    _print_report(run(_run_config(args, args.input), args.out), hands=args.mode == "hands")
+
+
+def _cmd_batch(args):
+    from jaxmocap.batch import BatchConfig, batch, read_manifest
+
+    inputs = list(args.inputs) + ([] if args.manifest is None else read_manifest(args.manifest))
+    config = BatchConfig(tuple(inputs), _run_config(args, ""), workers=args.workers, address=args.address)
+    report = batch(config, args.out)
+    print(report.summary())
+    return 1 if report.failed else 0
 
 
 def _cmd_demo(args):
@@ -134,20 +151,8 @@ def _mode_options(p) -> None:
                    help="hands tracked at most in --mode hands (default: %(default)s)")
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(allow_abbrev=False, prog="jaxmocap", description=__doc__)
-    commands = parser.add_subparsers(dest="command", required=True)
-    command = functools.partial(commands.add_parser, allow_abbrev=False)  # a mistyped option is an error
-
-    p = command("demo", help="the main job on the bundled sample clip: motion, overlay video, exports")
-    p.add_argument("--out", type=Path, default=Path("jaxmocap_demo"), help="output folder (default: %(default)s)")
-    p.add_argument("--frankmocap-pkl", action="store_true",
-                   help="also FrankMocap's per-frame prediction pickles in DIR/mocap/")
-    p.set_defaults(run=_cmd_demo)
-
-    p = command("run", help="video, image folder, image or webcam -> DIR/motion.npz, overlay, exports")
-    p.add_argument("input", help="video file, image folder, single image or webcam index")
-    p.add_argument("--out", type=Path, default=Path("jaxmocap_out"), help="output folder (default: %(default)s)")
+def _run_options(p) -> None:
+    """Every option of ``run`` but its input and ``--out``: ``run``'s and ``batch``'s (`_run_config`)."""
     _mode_options(p)
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
     p.add_argument("--weights", type=Path, default=None, help="FrankMocap regressors from convert-frankmocap")
@@ -176,7 +181,37 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-smooth", action="store_true", help="no temporal smoothing")
     p.add_argument("--no-overlay", action="store_true", help="no overlay video")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(allow_abbrev=False, prog="jaxmocap", description=__doc__)
+    commands = parser.add_subparsers(dest="command", required=True)
+    command = functools.partial(commands.add_parser, allow_abbrev=False)  # a mistyped option is an error
+
+    p = command("demo", help="the main job on the bundled sample clip: motion, overlay video, exports")
+    p.add_argument("--out", type=Path, default=Path("jaxmocap_demo"), help="output folder (default: %(default)s)")
+    p.add_argument("--frankmocap-pkl", action="store_true",
+                   help="also FrankMocap's per-frame prediction pickles in DIR/mocap/")
+    p.set_defaults(run=_cmd_demo)
+
+    p = command("run", help="video, image folder, image or webcam -> DIR/motion.npz, overlay, exports")
+    p.add_argument("input", help="video file, image folder, single image or webcam index")
+    p.add_argument("--out", type=Path, default=Path("jaxmocap_out"), help="output folder (default: %(default)s)")
+    _run_options(p)
     p.set_defaults(run=_cmd_run)
+
+    p = command("batch", help="many videos as Ray tasks -> DIR/<stem>/ each as `run` writes it, DIR/batch.json")
+    p.add_argument("inputs", nargs="*", metavar="INPUT", help="video files, image folders or stream URLs")
+    p.add_argument("--manifest", type=Path, default=None, metavar="FILE", help="more inputs, one per line")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="output folder: DIR/<stem>/ per video, DIR/batch.json")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="videos solved at once (default: this machine's cores; with --address, the cluster's)")
+    p.add_argument("--address", default=None, metavar="ADDR",
+                   help="a Ray cluster's address (HOST:PORT of `ray start --head`); default: a local Ray on "
+                        "127.0.0.1 for this batch alone")
+    _run_options(p)
+    p.set_defaults(run=_cmd_batch)
 
     p = command("live", help="webcam, stream or file -> SMPL-X frame by frame, on a web page and over UDP")
     p.add_argument("source", help="webcam index (0), stream URL, or video file")
@@ -254,20 +289,6 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def use_compilation_cache() -> None:
-    """Keep XLA's compiled programs on disk (``$JAXMOCAP_CACHE/xla``, at most 1 GiB, least recently used out), so
-    that a second run skips most compilation (docs/BENCHMARKS.md, "End to end"). ``JAX_COMPILATION_CACHE_DIR``
-    takes precedence."""
-    import jax
-
-    from smplx_jax.default_model import cache_root
-
-    if jax.config.jax_compilation_cache_dir is None:
-        jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-        jax.config.update("jax_compilation_cache_max_size", 1 << 30)
-
-
 def main(argv=None) -> int:
     from smplx_jax import ModelFileError
 
@@ -275,15 +296,15 @@ def main(argv=None) -> int:
     if args.command != "bench":  # benchmarks time first runs, compilation included
         use_compilation_cache()
     try:
-        args.run(args)
+        code = args.run(args)
     except (InputError, ModelFileError, OSError) as err:
         print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # `live` stops on Ctrl-C by itself; elsewhere it interrupts
-        resume = "; run the same command again to resume" if args.command in ("run", "demo") else ""
+        resume = "; run the same command again to resume" if args.command in ("run", "demo", "batch") else ""
         print(f"jaxmocap {args.command}: interrupted{resume}", file=sys.stderr)
         return 130
-    return 0
+    return code or 0  # `batch`: 1 when a video failed
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ CHUNK = 4  # the resumed run's, as tests/test_pipeline.py's: the per-chunk stage
 @pytest.fixture(scope="module")
 def whole_clip(tmp_path_factory):
     out = tmp_path_factory.mktemp("multi")
-    report = pipeline_job.run(RunConfig(CLIP, chunk_size=50, max_people=3, progress=False), out)
+    report = pipeline_job.run_bodies(RunConfig(CLIP, chunk_size=50, max_people=3, progress=False), out)
     return out, report
 
 
@@ -63,10 +63,10 @@ def test_openpose_json_lists_every_person_with_its_id(whole_clip):
 def test_resume_with_several_people(tmp_path, monkeypatch):
     """Interrupted after a chunk, run again: every person's motion as in one go, with the same identities."""
     config = RunConfig(CLIP, end=3 * CHUNK, chunk_size=CHUNK, max_people=3, overlay=False, progress=False)
-    whole = pipeline_job.run(config, tmp_path / "whole")
+    whole = pipeline_job.run_bodies(config, tmp_path / "whole")
     with interrupted_at_chunk(monkeypatch, 1), pytest.raises(KeyboardInterrupt):
-        pipeline_job.run(config, tmp_path / "resumed")
-    resumed = pipeline_job.run(config, tmp_path / "resumed")
+        pipeline_job.run_bodies(config, tmp_path / "resumed")
+    resumed = pipeline_job.run_bodies(config, tmp_path / "resumed")
     assert resumed.people == whole.people and len(whole.people) >= 2
     for i in whole.people:
         path = Path("people") / str(i) / "motion.npz"

@@ -36,7 +36,7 @@ FRAMES, CHUNK = 8, 4  # every run here has the same shapes, so the jitted stages
 
 
 def run(source, out, **options):
-    return pipeline_job.run(RunConfig(source, **options), out)
+    return pipeline_job.run_bodies(RunConfig(source, **options), out)
 
 
 @pytest.fixture(scope="module")

@@ -283,22 +283,3 @@ def _sheltered():
     finally:
         signal.signal(signal.SIGINT, previous)
 
-
-def live(config: LiveConfig, started=None) -> LiveReport:
-    """Run a live session until the source ends, ``max_frames`` are solved or Ctrl-C; ``started(port)`` is called
-    when capture starts, after compiling (``port``: the web page's, or None). ``mode`` ``hands`` solves hands
-    alone (`jaxmocap.live.hands.HandSession`)."""
-    if config.mode == "hands":
-        from jaxmocap.live.hands import HandSession
-
-        session = HandSession(config)
-    else:
-        session = Session(config)
-    try:
-        session.warm_up()
-    except BaseException:
-        session.close()
-        raise
-    if started is not None:
-        started(None if session.viewer is None else session.viewer.port)
-    return session.run()

@@ -1,20 +1,22 @@
-"""The main job: a video in, whole-body SMPL-X motion out (``jaxmocap run`` and ``jaxmocap demo``).
+"""The main job: a video in, whole-body SMPL-X motion out (``jaxmocap run``, ``demo`` and ``batch``).
 
     from jaxmocap.pipeline import RunConfig, run
     report = run(RunConfig("video.mp4", exports=("bvh",)), "out")
 
-Modules: `config` (`RunConfig`), `job` (`run`, which reads as its stages), `stages` (observations -> initial
-bodies -> fits -> smoothed -> motion arrays), `regress` (FrankMocap's regressors in place of IK and fit), `records`
-(what the stages hand each other), `chunks` (the resumable chunk store), `outputs` (OpenPose JSON, overlay,
-exports, FrankMocap pickles), `observe` (the detector's person as arrays, repaired), `fit_folder` (``jaxmocap
-fit``), `chrono` (stage timing), `exemplar` and `hand_boxes` (parts of the regressors' path); `hands_job` is
-``--mode hands`` (hands alone: ``hands.npz``).
+Modules: `config` (`RunConfig`), `entry` (`run`, every mode's entry), `job` (`run_bodies`, ``--mode whole`` and
+``body``, which reads as its stages), `hands_job` (`run_hands`, ``--mode hands``: hands alone, ``hands.npz``),
+`stages` (observations -> initial bodies -> fits -> smoothed -> motion arrays), `regress` (FrankMocap's regressors
+in place of IK and fit), `records` (what the stages hand each other), `report` (`RunReport`), `chunks` (frames in
+chunks and the resumable chunk store), `outputs` (OpenPose JSON, overlay, exports, FrankMocap pickles), `observe`
+(the detector's person as arrays, repaired), `fit_folder` (``jaxmocap fit``), `chrono` (stage timing), `exemplar`
+and `hand_boxes` (parts of the regressors' path). Imports run one way: `entry` -> the jobs -> the rest.
 """
 
 from jaxmocap.pipeline.config import RunConfig
-from jaxmocap.pipeline.job import RunReport, run
+from jaxmocap.pipeline.entry import run
 from jaxmocap.pipeline.observe import Observations, observe
 from jaxmocap.pipeline.records import Bodies, Chunk
+from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import fitted_bodies, initial_bodies, motion_arrays, observations, smoothed
 
 __all__ = ["Bodies", "Chunk", "Observations", "RunConfig", "RunReport", "fitted_bodies", "initial_bodies",

@@ -1,13 +1,17 @@
-"""Resumable chunk store: each finished chunk of frames is a file; a rerun with the same settings skips them."""
+"""Frames in chunks (`frame_batches`) and the resumable chunk store: each finished chunk of frames is a file; a rerun
+with the same settings skips them."""
 
 import io
 import json
 import shutil
+from collections.abc import Iterator
+from itertools import islice
 from pathlib import Path
 
 import numpy as np
 
 from jaxmocap.io import atomic_write_bytes, atomic_write_text
+from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.records import Chunk
 
 
@@ -43,3 +47,13 @@ class ChunkStore:
 
     def clear(self) -> None:
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def frame_batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[list]:
+    """Lists of ``size`` items of ``frames`` (the last shorter), their reading timed as ``decode``."""
+    while True:
+        with chrono("decode"):
+            batch = list(islice(frames, size))
+        if not batch:
+            return
+        yield batch

@@ -26,12 +26,12 @@ from jaxmocap.frame_source import open_media
 from jaxmocap.hand_motion import HAND_SHAPES, hand_meshes, write_hands
 from jaxmocap.integrate.hand_fit import fit_hands, hand_keypoint_model
 from jaxmocap.integrate.smooth import smooth_linear, smooth_rotvecs
-from jaxmocap.io import file_sha256
+from jaxmocap.io import atomic_path, file_sha256
 from jaxmocap.overlay import OverlayWriter, Posed
 from jaxmocap.pipeline.chrono import Chrono
-from jaxmocap.pipeline.chunks import ChunkStore
+from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
 from jaxmocap.pipeline.config import RunConfig, chunk_key
-from jaxmocap.pipeline.job import RunReport, _batches
+from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import SMOOTHING_SLACK
 
 SETTINGS_VERSION = 1  # of the stored chunks
@@ -124,14 +124,14 @@ def solved_hand_chunks(config: RunConfig, media, frames, tracker: HandTracker, s
 
     done = 0
     with tqdm(total=media.frame_count, unit="frame", desc="hands", disable=not config.progress) as bar:
-        for index, batch in enumerate(_batches(frames, config.chunk_size, chrono)):
+        for index, batch in enumerate(frame_batches(frames, config.chunk_size, chrono)):
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
                 chunk = solve(ids, [frame for _, frame in batch], chrono)
-                store.save(index, chunk)
-                with chrono("keypoints"):
+                with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its JSON written
                     write_hand_keypoints(out_dir / "keypoints", media, chunk, done, config.max_hands)
+                store.save(index, chunk)
             else:
                 tracker.restore(chunk.tracking)
             yield chunk
@@ -264,14 +264,14 @@ def write_hand_keypoints(folder: Path, media, chunk: HandChunk, first: int, max_
 def write_hands_overlay(path: Path, config: RunConfig, hand_models: dict, hands: dict, fps: float,
                         image_size: tuple[int, int], total: int, batch: int = 16) -> Path:
     """The run's frames with the fitted hand meshes drawn over them (left in one colour, right in another, each
-    labelled), beside a side view."""
+    labelled), beside a side view; written atomically."""
     _, frames = open_media(config.source, config.start, config.end, config.stride)
     from tqdm import tqdm
 
     meshes = {side: np.asarray(hand_meshes(hand_models[side], hands[f"{side}_global_orient"],
                                            hands[f"{side}_hand_pose"]).vertices) for side in SIDES}
     faces = {side: np.asarray(hand_models[side].faces) for side in SIDES}
-    with OverlayWriter(path, image_size, fps, faces["right"]) as writer, \
+    with atomic_path(path) as tmp, OverlayWriter(tmp, image_size, fps, faces["right"]) as writer, \
             tqdm(total=total, unit="frame", desc="overlay", disable=not config.progress) as bar:
         for start in range(0, total, batch):
             images = [frame for _, (_, frame) in zip(range(min(batch, total - start)), frames)]

@@ -7,13 +7,12 @@ copy-and-paste -> optionally the same fit. ``--mode body`` runs no hand model (t
 hand IK, no hand regressor): the hands stay flat. Frames go in chunks; each finished chunk is stored, so an
 interrupted run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (each chunk
 stores what the detector and the identities carry on to the next). Then over the whole sequence, for each person:
-temporal smoothing -> ``motion.npz`` -> the outputs. ``--mode hands`` is `hands_job`'s.
+temporal smoothing -> ``motion.npz`` -> the outputs. ``--mode hands`` is `hands_job`'s (`entry.run` dispatches).
 """
 
 import dataclasses
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from itertools import islice
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +26,7 @@ from jaxmocap.integrate import FitConfig
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
-from jaxmocap.pipeline.chunks import ChunkStore
+from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
 from jaxmocap.pipeline.coherent import coherent
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
@@ -36,6 +35,7 @@ from jaxmocap.pipeline.observe import Observations
 from jaxmocap.pipeline.outputs import write_keypoints, write_outputs
 from jaxmocap.pipeline.records import Bodies, Chunk, Track
 from jaxmocap.pipeline.regress import Regression, regressed_bodies
+from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import (
     FIT_FROM_IK,
     Lens,
@@ -50,19 +50,6 @@ from jaxmocap.pipeline.stages import (
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
 SETTINGS_VERSION = 6  # of the stored chunks: bump when what a chunk holds changes
-
-
-@dataclass(frozen=True)
-class RunReport:
-    """What a run wrote, and how long each stage took (seconds). ``--mode hands``: ``motion`` is hands.npz,
-    ``valid`` counts frames with a hand and ``people`` the hands' identities."""
-
-    motion: Path
-    frames: int
-    valid: int
-    seconds: dict[str, float]
-    written: list[Path]
-    people: list[int]  # the identities with a motion in ``people/<id>/``
 
 
 @dataclass(frozen=True)
@@ -90,16 +77,14 @@ class Inputs:
         return cls(model, file_sha256(model_path), regression, given, media, frames, lens)
 
 
-def run(config: RunConfig, out_dir, observed: Observer | None = None) -> RunReport:
-    """Run ``config`` and write ``out_dir/motion.npz`` (the main person; docs/formats.md), each person's
-    ``out_dir/people/<id>/motion.npz``, the detections as OpenPose JSON in ``out_dir/keypoints/``, and the outputs
-    ``config`` asks for (`write_outputs`). ``--mode hands`` is `hands_job.run_hands`'s (``out_dir/hands.npz``).
+def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> RunReport:
+    """Run ``config`` (``--mode whole`` or ``body``) and write ``out_dir/motion.npz`` (the main person;
+    docs/formats.md), each person's ``out_dir/people/<id>/motion.npz``, the detections as OpenPose JSON in
+    ``out_dir/keypoints/``, and the outputs ``config`` asks for (`write_outputs`).
     ``observed(chunk, people)``, if given, sees each chunk solved (not those restored from a stored run) with its
     people's `Observations` by identity, as the fit took them (`bench/accuracy.py` scores the stages from them)."""
     if config.mode == "hands":
-        from jaxmocap.pipeline.hands_job import run_hands
-
-        return run_hands(config, out_dir)
+        raise ValueError("config: --mode hands is hands_job.run_hands's (pipeline.run dispatches)")
     out_dir = Path(out_dir)
     (out_dir / "keypoints").mkdir(parents=True, exist_ok=True)
     inputs = Inputs.open(config)
@@ -171,15 +156,15 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
     tracker = None if still else IdentityTracker()
     done = 0
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
-        for index, batch in enumerate(_batches(inputs.frames, config.chunk_size, chrono)):
+        for index, batch in enumerate(frame_batches(inputs.frames, config.chunk_size, chrono)):
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
                 chunk = solve_chunk(config, inputs, detector, tracker, ids, [frame for _, frame in batch], chrono,
                                     observed)
-                store.save(index, chunk)
-                with chrono("keypoints"):
+                with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its JSON written
                     write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
+                store.save(index, chunk)
             else:
                 _restore(chunk.tracking, detector, tracker)
             yield chunk
@@ -229,11 +214,3 @@ def _restore(tracking: dict[str, np.ndarray], detector: Detector, tracker: Ident
     if tracker is not None:
         tracker.restore(part("identities/"))
 
-
-def _batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[list]:
-    while True:
-        with chrono("decode"):
-            batch = list(islice(frames, size))
-        if not batch:
-            return
-        yield batch

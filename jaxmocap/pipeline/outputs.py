@@ -14,7 +14,7 @@ from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.export import animation, write_bvh, write_gltf
 from jaxmocap.export.frankmocap import write_frankmocap_pkls
 from jaxmocap.frame_source import Media, open_media
-from jaxmocap.io import atomic_write_bytes
+from jaxmocap.io import atomic_path, atomic_write_bytes
 from jaxmocap.motion import lens, motion_params
 from jaxmocap.overlay import OverlayWriter, Posed, body_up
 from jaxmocap.pipeline.chrono import Chrono
@@ -28,13 +28,14 @@ _BATCH = 16
 def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dict], config: RunConfig,
                   image_size: tuple[int, int], total: int) -> Path:
     """The ``total`` frames of the run again, each with its people's fitted meshes drawn over it in their colours
-    with their identities, beside a side view of them."""
+    with their identities, beside a side view of them; written atomically (an interrupted run leaves none)."""
     media, frames = open_media(config.source, config.start, config.end, config.stride)
     faces = np.asarray(model.faces)
     orients = [m["global_orient"][m["valid"]] for m in motions.values()]
     up = body_up(np.concatenate(orients)) if sum(map(len, orients)) else None
     lenses = lens(next(iter(motions.values()))) if motions else (None, None)
-    with OverlayWriter(path, image_size, media.fps, faces, lens=lenses, up=up, spread=_spread(motions)) as writer, \
+    with atomic_path(path) as tmp, \
+            OverlayWriter(tmp, image_size, media.fps, faces, lens=lenses, up=up, spread=_spread(motions)) as writer, \
             tqdm(total=total, unit="frame", desc="overlay", disable=not config.progress) as bar:
         for start in range(0, total, _BATCH):
             batch = [frame for _, (_, frame) in zip(range(min(_BATCH, total - start)), frames)]

@@ -1,0 +1,312 @@
+"""``jaxmocap batch`` on Ray: bad inputs fail alone, a killed worker's video is retried to the same result, a
+cluster is joined at its address, Ctrl-C stops cleanly, outputs equal separate runs, a second call rewrites
+nothing; and the run and live modes import one way.
+
+Every batch runs the CLI in a process of its own (as a user would; Ray's state stays out of pytest's), on frames
+20-28 of the bundled clip in chunks of 4 (tests/test_pipeline.py's shapes: the suite compiles them once, in its
+shared compile cache), without overlay. Each Ray lives in a temporary folder of the test's and ends with it.
+"""
+
+import ast
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+
+from jaxmocap.batch import BatchConfig
+from jaxmocap.batch.videos import folder_names, read_manifest
+from jaxmocap.cli import main
+from jaxmocap.errors import InputError
+from jaxmocap.pipeline import RunConfig
+
+ROOT = Path(__file__).parents[1]
+CLIP = ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
+OPTIONS = ["--start", "20", "--end", "28", "--chunk", "4", "--no-overlay", "--quiet"]
+LOOPBACK = ("127.0.0.1", "::1", "::ffff:127.0.0.1")
+
+
+def jaxmocap(*args: str) -> list[str]:
+    return [sys.executable, "-m", "jaxmocap.cli", *args]
+
+
+def ledger(out: Path) -> list[dict]:
+    return json.loads((out / "batch.json").read_text())["videos"]
+
+
+def assert_motions_equal(path: Path, reference: Path) -> None:
+    ours, theirs = np.load(path), np.load(reference)
+    assert sorted(ours.files) == sorted(theirs.files)
+    for key in theirs.files:
+        if theirs[key].dtype.kind in "fiub":
+            np.testing.assert_allclose(ours[key], theirs[key], atol=1e-5, rtol=0, err_msg=key)
+        else:
+            assert ours[key] == theirs[key], key
+
+
+def files_with_times(folder: Path) -> dict[str, tuple[int, int]]:
+    return {str(p.relative_to(folder)): (p.stat().st_mtime_ns, p.stat().st_size) for p in folder.rglob("*")}
+
+
+def temporary_files(folder: Path) -> list[Path]:
+    """What an atomic write leaves behind if it is cut short (`smplx_jax.io.atomic_path`'s names)."""
+    return [p for p in folder.rglob(".*") if ".tmp" in p.name]
+
+
+def wait_for(predicate, seconds: float, what: str):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        found = predicate()
+        if found:
+            return found
+        time.sleep(0.02)
+    raise AssertionError(f"timed out after {seconds} s waiting for {what}")
+
+
+def processes_in(folder: Path) -> list[psutil.Process]:
+    """Ray's processes that live in ``folder`` (their command lines name it)."""
+    found = []
+    for proc in psutil.process_iter(["cmdline"]):
+        if any(str(folder) in arg for arg in proc.info["cmdline"] or ()):
+            found.append(proc)
+    return found
+
+
+def task_process(descending_from: int | None = None) -> psutil.Process | None:
+    """The Ray worker running a video (Ray titles it ``ray::run_video``), below ``descending_from`` if given."""
+    for proc in psutil.process_iter(["cmdline"]):
+        if (proc.info["cmdline"] or [""])[0].startswith("ray::run_video"):
+            if descending_from is None or descending_from in (p.pid for p in proc.parents()):
+                return proc
+    return None
+
+
+@pytest.fixture(scope="module")
+def ray_env():
+    """The environment of the batches: Ray's files in a short temporary folder (its sockets' paths must stay
+    short), removed after; no token file in the home folder."""
+    folder = Path(tempfile.mkdtemp(prefix="ray-", dir="/tmp"))
+    yield os.environ | {"RAY_TMPDIR": str(folder), "RAY_AUTH_MODE": "disabled"}, folder
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory) -> dict[str, Path]:
+    """The clip; an empty file of the same name (another folder); a corrupt one (the clip cut short)."""
+    root = tmp_path_factory.mktemp("clips")
+    (root / "good").mkdir()
+    (root / "empty").mkdir()
+    shutil.copy(CLIP, root / "good" / CLIP.name)
+    (root / "empty" / CLIP.name).write_bytes(b"")
+    (root / "corrupt.mp4").write_bytes(CLIP.read_bytes()[:3000])
+    return {"good": root / "good" / CLIP.name, "empty": root / "empty" / CLIP.name, "corrupt": root / "corrupt.mp4"}
+
+
+@pytest.fixture(scope="module")
+def separate_run(tmp_path_factory) -> Path:
+    """``jaxmocap run`` of the clip on its own: the motion every batch of it must equal."""
+    out = tmp_path_factory.mktemp("separate")
+    assert main(["run", str(CLIP), "--out", str(out), *OPTIONS]) == 0
+    return out / "motion.npz"
+
+
+@pytest.fixture(scope="module")
+def local_batch(clips, ray_env, separate_run, tmp_path_factory):
+    """A batch on a local Ray of two workers: the good clip, the empty file and the corrupt one (after the separate
+    run, whose programs the workers read back from the compile cache instead of both compiling them at once)."""
+    out = tmp_path_factory.mktemp("local") / "out"
+    env, _ = ray_env
+    proc = subprocess.run(jaxmocap("batch", str(clips["good"]), str(clips["empty"]), str(clips["corrupt"]),
+                                   "--out", str(out), "--workers", "2", *OPTIONS),
+                          capture_output=True, text=True, env=env, timeout=540)
+    return proc, out
+
+
+def test_bad_inputs_fail_alone_with_one_line_causes(local_batch, clips):
+    proc, out = local_batch
+    assert proc.returncode == 1, proc.stderr
+    assert "1 of 3 videos done" in proc.stdout and "2 failed" in proc.stdout
+    good, empty, corrupt = ledger(out)
+    assert (good["input"], good["status"], good["error"]) == (str(clips["good"]), "done", None)
+    assert good["frames"] == 8 and good["valid"] == 8 and good["people"] == 1 and good["reprojection_px"] < 25
+    for record, path in ((empty, clips["empty"]), (corrupt, clips["corrupt"])):
+        assert record["status"] == "failed" and str(path) in record["error"] and "\n" not in record["error"]
+        assert record["frames"] is None and record["seconds"] >= 0
+    # two inputs with one stem, two folders
+    assert (good["out"], empty["out"]) == (str(out / CLIP.stem), str(out / f"{CLIP.stem}_2"))
+    rows = (out / "batch.csv").read_text().splitlines()
+    assert rows[0] == "input,out,status,error,frames,people,valid,reprojection_px,seconds"
+    assert [r.split(",")[2] for r in rows[1:]] == ["done", "failed", "failed"]
+
+
+def test_batch_writes_what_run_writes(local_batch, separate_run):
+    _, out = local_batch
+    assert_motions_equal(out / CLIP.stem / "motion.npz", separate_run)
+    ours = sorted(str(p.relative_to(out / CLIP.stem)) for p in (out / CLIP.stem).rglob("*"))
+    theirs = sorted(str(p.relative_to(separate_run.parent)) for p in separate_run.parent.rglob("*"))
+    assert ours == theirs
+
+
+@pytest.fixture(scope="module")
+def ray_head(ray_env):
+    """A Ray head of two CPUs that the test starts in its temporary folder, on 127.0.0.1, and stops after (SIGTERM
+    to ``ray start --block`` ends its processes): ``(address, pid)``."""
+    env, folder = ray_env
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = env | {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_USAGE_STATS_ENABLED": "0"}
+    head_dir = folder / "head"
+    head = subprocess.Popen([str(Path(sys.executable).parent / "ray"), "start", "--head", "--block",
+                             f"--port={port}", "--num-cpus=2", f"--temp-dir={head_dir}", "--include-dashboard=false",
+                             "--disable-usage-stats", "--node-ip-address=127.0.0.1"],
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        wait_for(lambda: (head_dir / "session_latest" / "logs" / "raylet.out").exists(), 120, "the Ray head")
+        yield f"127.0.0.1:{port}", head.pid
+    finally:
+        head.send_signal(signal.SIGTERM)
+        head.wait(timeout=60)
+    wait_for(lambda: not processes_in(head_dir), 30, "the head's processes to end")
+
+
+@pytest.fixture(scope="module")
+def cluster_batch(ray_head, ray_env, tmp_path_factory):
+    """A batch of the clip on the test's Ray head (``--address``) whose worker is killed (SIGKILL) mid-video, after
+    its first chunk is stored: ``(process, out, killed worker, seconds)``."""
+    address, head_pid = ray_head
+    env, _ = ray_env
+    out = tmp_path_factory.mktemp("cluster") / "out"
+    started = time.perf_counter()
+    batch = subprocess.Popen(jaxmocap("batch", str(CLIP), "--out", str(out), "--address", address, *OPTIONS),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    chunks = out / CLIP.stem / ".jaxmocap_chunks"
+    try:
+        wait_for(lambda: (chunks / "chunk_000000.npz").exists(), 420, "the first chunk")
+        worker = task_process(descending_from=head_pid)
+        assert worker is not None, "the video runs on the head's workers"
+        assert not (out / CLIP.stem / "motion.npz").exists()  # mid-video
+        worker.kill()
+        stdout, stderr = batch.communicate(timeout=420)
+    finally:
+        batch.kill()
+    return subprocess.CompletedProcess(batch.args, batch.returncode, stdout, stderr), out, worker, \
+        time.perf_counter() - started
+
+
+def test_batch_joins_a_cluster_at_its_address(cluster_batch, ray_head):
+    proc, out, worker, _ = cluster_batch
+    assert proc.returncode == 0, proc.stderr
+    assert [v["status"] for v in ledger(out)] == ["done"]
+    assert worker.pid not in (p.pid for p in psutil.process_iter())
+
+
+def test_killed_worker_is_retried_to_the_same_result(cluster_batch, separate_run):
+    proc, out, _, _ = cluster_batch
+    assert proc.returncode == 0, proc.stderr
+    assert_motions_equal(out / CLIP.stem / "motion.npz", separate_run)
+    assert not (out / CLIP.stem / ".jaxmocap_chunks").exists()
+
+
+def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, ray_head, ray_env):
+    first, out, _, first_seconds = cluster_batch
+    assert first.returncode == 0, first.stderr
+    before = files_with_times(out)
+    started = time.perf_counter()
+    proc = subprocess.run(jaxmocap("batch", str(CLIP), "--out", str(out), "--address", ray_head[0], *OPTIONS),
+                          capture_output=True, text=True, env=ray_env[0], timeout=120)
+    seconds = time.perf_counter() - started
+    assert proc.returncode == 0, proc.stderr
+    assert "1 finished before" in proc.stdout
+    assert files_with_times(out) == before
+    assert seconds < 0.25 * first_seconds, (seconds, first_seconds)
+
+
+def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
+    """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video's stored chunks kept for the next call,
+    nothing half-written, and the local Ray (which listened on 127.0.0.1 alone) gone."""
+    env, _ = ray_env
+    out = tmp_path / "out"
+    batch = subprocess.Popen(jaxmocap("batch", str(CLIP), "--out", str(out), "--workers", "1", *OPTIONS),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        wait_for(lambda: (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists(), 300, "the video to start")
+        ray_processes = psutil.Process(batch.pid).children(recursive=True)
+        listening = [c.laddr.ip for p in ray_processes for c in p.net_connections("inet") if c.status == "LISTEN"]
+        assert listening and set(listening) <= set(LOOPBACK), listening
+        batch.send_signal(signal.SIGINT)
+        stdout, stderr = batch.communicate(timeout=180)
+    finally:
+        batch.kill()
+    assert batch.returncode == 130, stderr
+    assert stderr.strip().splitlines()[-1] == "jaxmocap batch: interrupted; run the same command again to resume"
+    assert "Traceback" not in stderr
+    assert not temporary_files(out) and not (out / CLIP.stem / "motion.npz").exists()
+    assert (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists()
+    assert ledger(out) == []
+    wait_for(lambda: not any(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in ray_processes), 30,
+             "the local Ray to stop")
+
+
+def test_batch_without_ray_says_how_to_install_it(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray fails, as where the extra is not installed
+    for name in ("RAY_USAGE_STATS_ENABLED", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"):
+        monkeypatch.setenv(name, "0")
+    assert main(["batch", str(CLIP), "--out", str(tmp_path), *OPTIONS]) == 2
+    assert capsys.readouterr().err == 'jaxmocap batch: error: batch needs Ray, an optional extra: pip install ' \
+                                      '"jaxmocap[batch]"\n'
+
+
+def test_inputs_get_distinct_folders_and_manifests_skip_comments(tmp_path):
+    assert folder_names(["/a/clip.mp4", "/b/clip.mp4", "/c/clip_2.mp4", "/d/frames", "rtsp://cam:554/live/s1",
+                         "/e/batch.json.mp4"]) == ["clip", "clip_2", "clip_2_2", "frames", "s1", "batch.json_2"]
+    manifest = tmp_path / "videos.txt"
+    manifest.write_text("# session 1\n/a/x.mp4\n\n  /b/y.mp4  \n")
+    assert read_manifest(manifest) == ["/a/x.mp4", "/b/y.mp4"]
+    with pytest.raises(InputError, match="--manifest: cannot read"):
+        read_manifest(tmp_path / "missing.txt")
+    with pytest.raises(InputError, match="--workers must be positive"):
+        BatchConfig(("a.mp4",), RunConfig(""), workers=0)
+
+
+def imports_of(path: Path, package: str) -> set[str]:
+    """The modules of ``package`` that a source file imports, anywhere in it (in functions too)."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith(package):
+            found |= {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+        elif isinstance(node, ast.Import):
+            found |= {a.name for a in node.names if a.name.startswith(package)}
+    return found
+
+
+def in_a_cycle(graph: dict[str, set[str]], start: str) -> bool:
+    seen, todo = set(), list(graph[start])
+    while todo:
+        module = todo.pop()
+        if module == start:
+            return True
+        if module not in seen:
+            seen.add(module)
+            todo += graph[module]
+    return False
+
+
+def test_no_import_cycle_among_the_modes():
+    """The run modes (`pipeline.entry` over `job` and `hands_job`), the live sessions (`live.entry` over `session`
+    and `hands`) and the batch import one way: no module of theirs imports itself through others."""
+    files = {".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): p
+             for p in (ROOT / "jaxmocap").rglob("*.py")}
+    graph = {m: {i for i in imports_of(p, "jaxmocap") if i in files and i != m} for m, p in files.items()}
+    assert "jaxmocap.pipeline.job" in graph["jaxmocap.pipeline.entry"]  # the graph sees the imports
+    scope = [m for m in graph if m.startswith(("jaxmocap.pipeline.", "jaxmocap.live.", "jaxmocap.batch."))]
+    assert not [m for m in scope if in_a_cycle(graph, m)]
