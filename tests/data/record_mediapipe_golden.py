@@ -16,7 +16,8 @@ import cv2
 import mediapipe as mp
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-IMAGES = ["messi5.jpg"] + [f"pose2sim_cam01_f{i:03d}.jpg" for i in (0, 20, 40, 60, 80, 99)] + ["pose2sim_multi_f050.jpg"]
+IMAGES = (["messi5.jpg"] + [f"pose2sim_cam01_f{i:03d}.jpg" for i in (0, 20, 40, 60, 80, 99)]
+          + ["pose2sim_multi_f050.jpg"])
 
 
 def main() -> None:
