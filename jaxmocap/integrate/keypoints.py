@@ -109,8 +109,8 @@ def keypoint_model(model: BodyModel, index) -> KeypointModel:
     per concrete model and index (some 50 ms of small eager operations: a fit of one frame took 43 ms, 30 of them
     here)."""
     index = np.asarray(index, dtype=np.int64)
-    if isinstance(model.joint_template, jax.core.Tracer):
-        return _keypoint_model(model, index)
+    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(model)):
+        return _keypoint_model(model, index)  # a traced model: its constants belong to that trace
     key = (id(model), tuple(index.tolist()))
     ref, km = _BUILT.get(key, (None, None))
     if ref is None or ref() is not model:
