@@ -58,6 +58,20 @@ def test_keypoint_jacobian_is_exact(x64, model_dir):
             np.testing.assert_allclose(a, b, atol=1e-10)
 
 
+def test_keypoint_constants_are_built_once_and_never_traced(model_dir):
+    """A concrete model's constants are built once, concrete even when first asked for inside `jax.jit` (then used
+    outside it); a traced model's belong to its trace."""
+    model = smplx_jax.load_model(model_dir / "smplx" / "SMPLX_NEUTRAL.npz")
+    index = OPENPOSE[:5] + 1
+    inside = jax.jit(lambda: keypoints.keypoint_model(model, index).reach.sum())()
+    km = keypoints.keypoint_model(model, index)
+    assert not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(km))
+    assert keypoints.keypoint_model(model, index) is km
+    np.testing.assert_allclose(inside, km.reach.sum(), rtol=1e-6)
+    traced = jax.jit(lambda m: keypoints.keypoint_model(m, index).reach.sum())(model)
+    np.testing.assert_allclose(traced, inside, rtol=1e-6)
+
+
 @pytest.mark.parametrize("focal", [None, 1500.0])
 def test_the_solvers_model_has_the_costs_gradient(x64, default_model_dir, focal):
     """The local model's gradient is the gradient of the cost optimistix minimises in the steps' coordinates (the

@@ -114,7 +114,8 @@ def keypoint_model(model: BodyModel, index) -> KeypointModel:
     key = (id(model), tuple(index.tolist()))
     ref, km = _BUILT.get(key, (None, None))
     if ref is None or ref() is not model:
-        km = _keypoint_model(model, index)
+        with jax.ensure_compile_time_eval():  # concrete constants, even when first asked for inside a trace
+            km = _keypoint_model(model, index)
         _BUILT[key] = (weakref.ref(model, lambda _, key=key: _BUILT.pop(key, None)), km)
     return km
 
