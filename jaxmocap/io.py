@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from jaxmocap.errors import InputError
-from smplx_jax.io import atomic_path, atomic_write_bytes, atomic_write_text
+from smplx_jax.io import atomic_path, atomic_write_bytes, atomic_write_text, remove_abandoned
 
 __all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "file_sha256", "read_result_npz",
-           "write_result_npz"]
+           "remove_abandoned", "write_result_npz"]
 
 
 def file_sha256(path) -> str:

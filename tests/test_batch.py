@@ -24,6 +24,7 @@ import psutil
 import pytest
 
 from jaxmocap.batch import BatchConfig
+from jaxmocap.batch.ledger import STOPPED
 from jaxmocap.batch.videos import folder_names, read_manifest
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
@@ -214,7 +215,7 @@ def test_killed_worker_is_retried_to_the_same_result(cluster_batch, separate_run
     proc, out, _, _ = cluster_batch
     assert proc.returncode == 0, proc.stderr
     assert_motions_equal(out / CLIP.stem / "motion.npz", separate_run)
-    assert not (out / CLIP.stem / ".jaxmocap_chunks").exists()
+    assert not (out / CLIP.stem / ".jaxmocap_chunks").exists() and not temporary_files(out)
 
 
 def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, ray_head, ray_env):
@@ -232,8 +233,9 @@ def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, r
 
 
 def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
-    """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video's stored chunks kept for the next call,
-    nothing half-written, and the local Ray (which listened on 127.0.0.1 alone) gone."""
+    """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video listed as stopped in batch.json, its
+    stored chunks kept for the next call, nothing half-written, and the local Ray (which listened on 127.0.0.1
+    alone) gone."""
     env, _ = ray_env
     out = tmp_path / "out"
     batch = subprocess.Popen(jaxmocap("batch", str(CLIP), "--out", str(out), "--workers", "1", *OPTIONS),
@@ -252,7 +254,8 @@ def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
     assert "Traceback" not in stderr
     assert not temporary_files(out) and not (out / CLIP.stem / "motion.npz").exists()
     assert (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists()
-    assert ledger(out) == []
+    (row,) = ledger(out)
+    assert (row["status"], row["error"], row["frames"]) == ("stopped", STOPPED, None), row
     wait_for(lambda: not any(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in ray_processes), 30,
              "the local Ray to stop")
 

@@ -14,15 +14,17 @@ from jaxmocap.io import atomic_write_text, file_sha256
 from jaxmocap.pipeline.config import AT_THE_END, RunConfig, chunk_key
 
 MARKS = ".jaxmocap_batch"
-STATUSES = ("done", "failed")
+STATUSES = ("done", "failed", "stopped")
+STOPPED = "stopped by Ctrl-C before it finished; the same command resumes it"
 
 
 @dataclass(frozen=True)
 class VideoRecord:
-    """One video of ``batch.json``: its ``input`` and output folder ``out``; ``status`` ``done`` or ``failed``;
-    ``error``, the one-line cause of a failure (else None); ``frames`` solved, ``people`` tracked (hands in
-    ``--mode hands``), ``valid`` frames with someone, ``reprojection_px`` the median reprojection error of the main
-    person's valid frames (None without any; all these None for a failed video); ``seconds`` of wall time."""
+    """One video of ``batch.json``: its ``input`` and output folder ``out``; ``status`` ``done``, ``failed`` or
+    ``stopped`` (by Ctrl-C, running or not yet started); ``error``, the one-line cause of a failure or stop (else
+    None); ``frames`` solved, ``people`` tracked (hands in ``--mode hands``), ``valid`` frames with someone,
+    ``reprojection_px`` the median reprojection error of the main person's valid frames (None without any; all
+    these None unless done); ``seconds`` of wall time."""
 
     input: str
     out: str
@@ -37,12 +39,12 @@ class VideoRecord:
     def __post_init__(self):
         if self.status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
-        if (self.status == "failed") != (self.error is not None) or "\n" in (self.error or ""):
-            raise ValueError(f"error: one line for a failed video, None for a done one; got {self.error!r}")
+        if (self.status == "done") != (self.error is None) or "\n" in (self.error or ""):
+            raise ValueError(f"error: one line for a failed or stopped video, None for a done one; got {self.error!r}")
 
     @classmethod
-    def failure(cls, source: str, out: str, cause: str, seconds: float) -> "VideoRecord":
-        return cls(source, out, "failed", one_line(cause), None, None, None, None, round(seconds, 3))
+    def failure(cls, source: str, out: str, cause: str, seconds: float, status: str = "failed") -> "VideoRecord":
+        return cls(source, out, status, one_line(cause), None, None, None, None, round(seconds, 3))
 
 
 FIELDS = tuple(f.name for f in dataclasses.fields(VideoRecord))

@@ -1,7 +1,7 @@
 """`batch`: the videos not finished before become Ray tasks (one until a video is done, so that the programs are
 compiled once; then a few in flight at a time), gathered as they finish into the ledger; a task whose worker died
 is retried by Ray (and resumes from its stored chunks); Ctrl-C cancels the tasks in flight (each rolls its writes
-back) and stops Ray."""
+back), lists the videos left as stopped and stops Ray."""
 
 import dataclasses
 import time
@@ -11,7 +11,7 @@ from pathlib import Path
 
 from jaxmocap.batch.cluster import connect
 from jaxmocap.batch.config import BatchConfig
-from jaxmocap.batch.ledger import VideoRecord, finished, mark_path, video_key, write_ledger
+from jaxmocap.batch.ledger import STOPPED, VideoRecord, finished, mark_path, video_key, write_ledger
 from jaxmocap.batch.task import run_video
 from jaxmocap.batch.videos import folder_names, resolved
 from jaxmocap.pipeline.config import RunConfig
@@ -113,7 +113,13 @@ def solve(config: BatchConfig, out_dir: Path, videos: list[Video], todo: list[in
             bar.update(len(ready))
             submit()
     except KeyboardInterrupt:
+        running = {i: submitted for i, submitted in pending.values()}
         gather(stop(ray, list(pending)))
+        now = time.perf_counter()
+        for i in set(todo) - set(records):  # listed as stopped: those that were running, and those not started
+            records[i] = VideoRecord.failure(str(videos[i].config.source), str(videos[i].out), STOPPED,
+                                             now - running.get(i, now), status="stopped")
+        write_ledger(out_dir, [records[i] for i in sorted(records)])
         raise
     finally:
         bar.close()
