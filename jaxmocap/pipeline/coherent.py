@@ -15,7 +15,7 @@ import smplx_jax
 from jaxmocap.integrate import FitConfig, fit
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.pipeline.records import Bodies
-from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
+from smplx_jax.rotations import rotvec_to_rotmat
 
 TURN_DEG = 45.0  # a body joint turning more than this from one frame to the next
 WRISTS = (20, 21)  # SMPL-X joints
@@ -27,8 +27,12 @@ def body_rotmats(global_orient: np.ndarray, body_pose: np.ndarray) -> np.ndarray
 
 
 def turns_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``(..., J)`` the angle, degrees, between each joint's rotations ``a`` and ``b`` ``(..., J, 3, 3)``."""
-    return np.degrees(np.linalg.norm(np.asarray(rotmat_to_rotvec(np.swapaxes(a, -1, -2) @ b)), axis=-1))
+    """``(..., J)`` the angle, degrees, between each joint's rotations ``a`` and ``b`` ``(..., J, 3, 3)``: of
+    ``R = a^T b``, ``atan2(|R - R^T| / 2, (trace R - 1) / 2)`` (NumPy: called once per frame across a turn)."""
+    r = np.swapaxes(a, -1, -2) @ b
+    sin = 0.5 * np.linalg.norm(np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
+                                         r[..., 1, 0] - r[..., 0, 1]], -1), axis=-1)
+    return np.degrees(np.arctan2(sin, 0.5 * (np.trace(r, axis1=-2, axis2=-1) - 1.0)))
 
 
 def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.ndarray):
