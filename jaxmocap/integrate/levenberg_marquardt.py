@@ -9,8 +9,11 @@ on the spot, a neck and head) stay aligned over a whole step, where axis-angle s
 ``SolverConfig.linear_solver`` says how the system is solved:
 
 * ``"cholesky"`` (default): exactly, by a dense Cholesky factorisation over the unknowns the solve moves (some
-  180: the joints of ``SolverConfig.joints``, the shape, the camera). Converges: the solve stops once a step at
-  damping at most 1 predicts a relative decrease of the cost below ``SolverConfig.tolerance``, and reports it.
+  180: the joints of ``SolverConfig.joints``, the shape, the camera), on ``H + S``: ``S`` estimates from the steps
+  taken the residuals' own curvature, which ``H`` leaves out (NL2SOL's structured secant, `updated_secant`; near
+  the optimum the fingertips' curvature is several times the Gauss-Newton one, and Gauss-Newton steps crawl).
+  Converges: the solve stops once a step at damping at most 1 predicts a relative decrease of the cost below
+  ``SolverConfig.tolerance``, and reports it.
 * ``"cg"``: ``cg_iterations`` steps of conjugate gradients, matrix-free, preconditioned by the 3x3 block of each
   joint, the shape's diagonal and the camera's block (`Blocks`): several times faster per step, inexact, for a
   fixed number of steps (the pipeline's and live capture's fits; the same stopping test, rarely met).
@@ -214,12 +217,18 @@ def _unflat(flat: Float[Array, "n"], like: Unknowns, config: SolverConfig) -> Un
                     flat[m + b:])
 
 
-def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig) -> Unknowns:
-    """The damped step ``-(H + damping diag(H))^-1 g``."""
+def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig, secant=None
+          ) -> tuple[Unknowns, Bool[Array, ""]]:
+    """The damped step ``-(H + damping diag(H))^-1 g`` and whether it used ``H + secant`` (dense ``H`` only: where
+    that is positive definite)."""
     if model.dense is not None:
         diagonal = jnp.diag(model.dense)
-        factor = jnp.linalg.cholesky(model.dense + jnp.diag(damping * jnp.maximum(diagonal, 1e-30 * diagonal.max())))
-        return _unflat(-jax.scipy.linalg.cho_solve((factor, True), _flat(model.gradient, config)), like, config)
+        damped = model.dense + jnp.diag(damping * jnp.maximum(diagonal, 1e-30 * diagonal.max()))
+        augmented, plain = jnp.linalg.cholesky(jnp.stack([damped + secant, damped]))  # one LAPACK call
+        use = jnp.all(jnp.isfinite(augmented))
+        factor = jnp.where(use, augmented, plain)
+        flat = -jax.scipy.linalg.cho_solve((factor, True), _flat(model.gradient, config))
+        return _unflat(flat, like, config), use
     shift = jax.tree.map(lambda d: damping * d + 1e-9 * (1.0 + d), model.diagonal)
     structure = jax.eval_shape(lambda: like)
     psd = lx.positive_semidefinite_tag
@@ -228,7 +237,26 @@ def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig) -> U
     preconditioner = lx.FunctionLinearOperator(model.blocks.damped_inverse(shift).mv, structure, psd)
     solver = lx.CG(rtol=0.0, atol=0.0, max_steps=config.cg_iterations, stabilise_every=None)
     return lx.linear_solve(operator, jax.tree.map(jnp.negative, model.gradient), solver,
-                           options=dict(preconditioner=preconditioner), throw=False).value
+                           options=dict(preconditioner=preconditioner), throw=False).value, jnp.array(False)
+
+
+def updated_secant(secant: Float[Array, "n n"], step: Float[Array, "n"], gradient_change: Float[Array, "n"],
+                   gauss_newton_change: Float[Array, "n"]) -> Float[Array, "n n"]:
+    """Dennis, Gay and Welsch's update (NL2SOL) of ``S``, the estimate of the residuals' own curvature
+    ``sum_i r_i d2r_i`` that the Gauss-Newton matrix leaves out, after a step ``s``: sized down by
+    ``min(1, |s^T y#| / |s^T S s|)``, then the symmetric rank-two change closest to it with ``(H_GN + S) s = y``
+    (``y`` the gradient's change, ``y# = y - H_GN s`` the part ``S`` must explain). Unchanged where ``s^T y`` is
+    not positive."""
+    s, y = step, gradient_change
+    sy = s @ y
+    ok = sy > 1e-12 * jnp.sqrt((s @ s) * (y @ y))
+    ssecs = s @ (secant @ s)
+    size = jnp.minimum(1.0, jnp.abs(s @ (y - gauss_newton_change)) / jnp.where(ssecs != 0, jnp.abs(ssecs), 1.0))
+    sized = jnp.where(ssecs != 0, size, 1.0) * secant
+    w = y - gauss_newton_change - sized @ s
+    sy = jnp.where(ok, sy, 1.0)
+    new = sized + (jnp.outer(w, y) + jnp.outer(y, w)) / sy - (w @ s) * jnp.outer(y, y) / sy**2
+    return jnp.where(ok, 0.5 * (new + new.T), secant)
 
 
 def _quat_product(a, b):
@@ -262,11 +290,17 @@ class _State(eqx.Module):
     damping: Float[Array, ""]  # Marquardt's mu
     growth: Float[Array, ""]  # Nielsen's factor for mu after a rejected step
     converged: Bool[Array, ""]
+    secant: Float[Array, "n n"]  # `updated_secant`'s S (dense steps; n = 0 for "cg")
+    last_step: Float[Array, "n"]  # the step that led here, when it was taken (``stepped``)
+    last_gradient: Float[Array, "n"]  # the gradient where it started
+    stepped: Bool[Array, ""]  # whether the last step was taken (the pair then updates S)
 
 
 class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
-    """Levenberg-Marquardt on `local_model` (the problem is the solve's ``args``); converged when a step at
-    damping at most 1 predicts a relative decrease of the cost of at most ``rtol``."""
+    """Levenberg-Marquardt on `local_model` (the problem is the solve's ``args``), dense steps on ``H + S`` with
+    ``S`` the residuals' curvature estimated from the steps taken (`updated_secant`; halved after a step it
+    mispredicted, left out where ``H + S`` is not positive definite); converged when a step at damping at most 1
+    predicts a relative decrease of the cost of at most ``rtol``."""
 
     config: SolverConfig = eqx.field(static=True)
     rtol: float
@@ -276,12 +310,23 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         cost = cost_of(y, args, self.config)
         one = jnp.ones((), cost.dtype)
-        return _State(cost, self.config.initial_damping * one, 2.0 * one, jnp.array(False))
+        n = _flat(y, self.config).shape[0] if self.config.linear_solver == "cholesky" else 0
+        zero = jnp.zeros(n, cost.dtype)
+        return _State(cost, self.config.initial_damping * one, 2.0 * one, jnp.array(False),
+                      jnp.zeros((n, n), cost.dtype), zero, zero, jnp.array(False))
 
     def step(self, fn, y, args, options, state, tags):
         model = local_model(y, args, self.config)
-        delta = _step(model, state.damping, y, self.config)
+        secant = state.secant
+        if model.dense is not None:
+            gradient = _flat(model.gradient, self.config)
+            secant = jnp.where(state.stepped, updated_secant(secant, state.last_step, gradient - state.last_gradient,
+                                                             model.dense @ state.last_step), secant)
+        delta, augmented = _step(model, state.damping, y, self.config, secant)
         predicted = -(_dot(model.gradient, delta) + 0.5 * _dot(delta, model.hessian(delta)))
+        if model.dense is not None:
+            flat = _flat(delta, self.config)
+            predicted = predicted - 0.5 * jnp.where(augmented, flat @ (secant @ flat), 0.0)
         trial = retract(y, delta)
         cost = cost_of(trial, args, self.config)
         accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
@@ -289,8 +334,15 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         converged = (predicted <= self.rtol * state.cost) & (state.damping <= 1.0)
         damping = jnp.where(accept, state.damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3),
                             state.damping * state.growth)
+        if model.dense is not None:
+            secant = jnp.where(~accept & augmented & (ratio < 0.25), 0.5 * secant, secant)
+            last_step = jnp.where(accept, flat, state.last_step)
+            last_gradient = jnp.where(accept, gradient, state.last_gradient)
+        else:
+            last_step, last_gradient = state.last_step, state.last_gradient
         new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING),
-                     jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged)
+                     jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged,
+                     secant, last_step, last_gradient, accept)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):
