@@ -217,7 +217,7 @@ def _unflat(flat: Float[Array, "n"], like: Unknowns, config: SolverConfig) -> Un
                     flat[m + b:])
 
 
-def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig, secant=None
+def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig, secant: Float[Array, "n n"]
           ) -> tuple[Unknowns, Bool[Array, ""]]:
     """The damped step ``-(H + damping diag(H))^-1 g`` and whether it used ``H + secant`` (dense ``H`` only: where
     that is positive definite)."""
