@@ -224,9 +224,10 @@ def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig, seca
     if model.dense is not None:
         diagonal = jnp.diag(model.dense)
         damped = model.dense + jnp.diag(damping * jnp.maximum(diagonal, 1e-30 * diagonal.max()))
-        augmented, plain = jnp.linalg.cholesky(jnp.stack([damped + secant, damped]))  # one LAPACK call
-        use = jnp.all(jnp.isfinite(augmented))
-        factor = jnp.where(use, augmented, plain)
+        # whether H + S is positive definite, then the factor of the matrix chosen (not of both under a `where`:
+        # the failed one's NaNs would reach the gradient of the steps)
+        use = jnp.all(jnp.isfinite(jnp.linalg.cholesky(jax.lax.stop_gradient(damped + secant))))
+        factor = jnp.linalg.cholesky(jnp.where(use, damped + secant, damped))
         flat = -jax.scipy.linalg.cho_solve((factor, True), _flat(model.gradient, config))
         return _unflat(flat, like, config), use
     shift = jax.tree.map(lambda d: damping * d + 1e-9 * (1.0 + d), model.diagonal)
