@@ -226,8 +226,9 @@ def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig, seca
         damped = model.dense + jnp.diag(damping * jnp.maximum(diagonal, 1e-30 * diagonal.max()))
         # whether H + S is positive definite, then the factor of the matrix chosen (not of both under a `where`:
         # the failed one's NaNs would reach the gradient of the steps)
-        use = jnp.all(jnp.isfinite(jnp.linalg.cholesky(jax.lax.stop_gradient(damped + secant))))
-        factor = jnp.linalg.cholesky(jnp.where(use, damped + secant, damped))
+        augmented = damped + secant
+        use = jnp.all(jnp.isfinite(jnp.linalg.cholesky(jax.lax.stop_gradient(augmented))))
+        factor = jnp.linalg.cholesky(jnp.where(use, augmented, damped))
         flat = -jax.scipy.linalg.cho_solve((factor, True), _flat(model.gradient, config))
         return _unflat(flat, like, config), use
     shift = jax.tree.map(lambda d: damping * d + 1e-9 * (1.0 + d), model.diagonal)
