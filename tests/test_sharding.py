@@ -23,12 +23,12 @@ SCRIPT = textwrap.dedent("""
     batches, fit_batch = [], fitting._fit_batch
     fitting._fit_batch = lambda *args: batches.append(fit_batch(*args)) or batches[-1]  # the real one, watched
     config = fitting.FitConfig(linear_solver="cg")  # the pipeline's steps (dense steps sharded: issue 25's note)
-    sharded = fit(model, problem.keypoints, init=problem.init, config=config)
+    sharded = fit(model, problem.keypoints, init=problem.init, config=config, iterations=20)
     status = batches[0].status  # the compiled batch ran split over the frames: two on each device
     assert len(status.sharding.device_set) == 4 and [s.data.shape for s in status.addressable_shards] == [(2,)] * 4
     # the same compiled batch with everything on one device
     fitting.shard_frames = lambda tree, n: jax.device_put(tree, jax.devices()[0])
-    single = fit(model, problem.keypoints, init=problem.init, config=config)
+    single = fit(model, problem.keypoints, init=problem.init, config=config, iterations=20)
     a = synthetic.openpose_projection(model, sharded.params, sharded.camera_scale, sharded.camera_trans)
     b = synthetic.openpose_projection(model, single.params, single.camera_scale, single.camera_trans)
     error_gap = np.abs(np.asarray(sharded.reprojection_error_px) - np.asarray(single.reprojection_error_px))

@@ -35,6 +35,7 @@ from smplx_jax import BodyModel, SMPLXParams, constants
 
 BUCKETS = (1, 8, 32, 64)  # padded batch sizes; longer inputs run in chunks of 64 (faster here than 1024: cache)
 MIN_KEYPOINTS = 3  # fewer visible keypoints: the frame has no person to fit
+ITERATIONS = 100  # the default cap on steps: most fits converge well within it (docs/BENCHMARKS.md, issue 25)
 
 OK, NO_KEYPOINTS, FAILED = 0, 1, 2  # FitResult.status
 
@@ -83,7 +84,14 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
     """`fit_frame` of one frame from its full pose ``(55, 3)`` with its keypoint model ``km`` made beforehand
     (`openpose_keypoint_model`); ``camera`` (3,) or None (fitted to the start); ``lens`` (`lens_arrays`):
     (1 / focal length, principal point), 1 / focal length 0 for weak perspective; ``free`` (55,) 1 for the joints
-    fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`."""
+    fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`.
+    Matrix products in full float32 on every device: a GPU's default TF32 ends the fit 0.3 px worse (on an H100,
+    at the same speed; docs/BENCHMARKS.md)."""
+    with jax.default_matmul_precision("highest"):
+        return _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint)
+
+
+def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint) -> FitResult:
     dtype = pose.dtype
     inv_focal, center = lens
     finite = jnp.all(jnp.isfinite(keypoints), axis=-1)
@@ -140,7 +148,7 @@ def lens_arrays(focal_length, principal_point, dtype):
 
 def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXParams, *,
               camera: Float[Array, "3"] | None = None, focal_length: float | None = None,
-              principal_point: Float[Array, "2"] | None = None, iterations: int = 20,
+              principal_point: Float[Array, "2"] | None = None, iterations: int = ITERATIONS,
               config: FitConfig | None = None, adjoint: optx.AbstractAdjoint | None = None) -> FitResult:
     """Fit one frame's ``keypoints (67, 3)`` (pixels; confidence 0 or NaN/inf = missing) from ``init`` (one
     body; hand poses absolute; ``transl`` and ``expression`` ignored, the result has no expression).
@@ -188,7 +196,7 @@ def _check(name, value, shape, dtype):
 
 
 def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_scale=None, camera_trans=None, *,
-        focal_length: float | None = None, principal_point=None, iterations: int = 20,
+        focal_length: float | None = None, principal_point=None, iterations: int = ITERATIONS,
         config: FitConfig | None = None, fixed_shape: bool = False, free_joints=None, progress=None) -> FitResult:
     """Fit every frame of ``keypoints (T, 67, 3)`` (`fit_frame` vmapped). ``init``: batched `SMPLXParams` (T leading),
     default `default_pose` with mean shape; ``fixed_shape``: keep ``init.betas`` (fit pose and camera);
@@ -229,4 +237,5 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
     return map_in_buckets(fit_chunk, (keypoints, pose, betas, camera, free), BUCKETS)
 
 
-__all__ = ["BUCKETS", "FitConfig", "FitResult", "default_pose", "fit", "fit_frame", "openpose_keypoint_model"]
+__all__ = ["BUCKETS", "ITERATIONS", "FitConfig", "FitResult", "default_pose", "fit", "fit_frame",
+           "openpose_keypoint_model"]
