@@ -147,7 +147,7 @@ def lens_arrays(focal_length, principal_point, dtype):
 
 
 def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXParams, *,
-              camera: Float[Array, "3"] | None = None, focal_length: float | None = None,
+              camera: Float[Array, "3"] | None = None, focal_length: float | Float[Array, ""] | None = None,
               principal_point: Float[Array, "2"] | None = None, iterations: int = ITERATIONS,
               config: FitConfig | None = None, adjoint: optx.AbstractAdjoint | None = None) -> FitResult:
     """Fit one frame's ``keypoints (67, 3)`` (pixels; confidence 0 or NaN/inf = missing) from ``init`` (one
