@@ -1,7 +1,7 @@
 """Optimization integration speed: frames/s of the fit (`jaxmocap.integrate.fit`, optimistix) over 256 and 1024
 frames and its final reprojection error, in two settings: the pipeline's (`jaxmocap.pipeline.stages.FIT_FROM_IK`,
-CG steps, 20 iterations) and the defaults (dense steps, at most 20, stopping once converged: the share converged
-is reported), against a PyTorch baseline on the same objective, data, start and
+CG steps, 20 iterations) and the defaults (dense steps, at most `fitting.ITERATIONS`, stopping once converged: the
+share converged is reported), against a PyTorch baseline on the same objective, data, start and
 threads: the ``smplx`` package + ``torch.optim.LBFGS`` (strong Wolfe line search, 20 iterations) and Adam (20 steps).
 (The comparison with the hand-written Levenberg-Marquardt that the optimistix fit replaced is in docs/BENCHMARKS.md,
 measured by this script at commit 990c816.)
@@ -17,6 +17,7 @@ O(1). The camera start is the same for both (fitted to the start pose's keypoint
 """
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -147,9 +148,9 @@ def main():
     km = fitting.openpose_keypoint_model(model)
     from jaxmocap.pipeline.stages import FIT_FROM_IK
 
-    config = fitting.FitConfig()
-    iterations = config.iterations
-    settings = {"pipeline": FIT_FROM_IK, "defaults": config}
+    config = fitting.FitConfig()  # the objective PyTorch minimises, for as many steps as the pipeline takes
+    iterations = FIT_FROM_IK.iterations
+    settings = {"pipeline": FIT_FROM_IK, "defaults": dataclasses.replace(config, iterations=fitting.ITERATIONS)}
 
     @jax.jit
     @jax.vmap
@@ -179,7 +180,8 @@ def main():
         rows.append(row)
         print(row, flush=True)
 
-    _print_table(rows, f"\nfit (at most {iterations} iterations), float32, {threads} threads, "
+    _print_table(rows, f"\nfit (pipeline and PyTorch {iterations} iterations, defaults at most "
+                 f"{fitting.ITERATIONS}), float32, {threads} threads, "
                  f"{platform.processor() or platform.machine()}, jax {jax.__version__}, torch {torch.__version__}; "
                  "median final reprojection error in px")
     args.out.mkdir(parents=True, exist_ok=True)
