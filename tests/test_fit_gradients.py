@@ -35,18 +35,19 @@ def _assert_matches_central_differences(value, grads, args, probes):
         numeric = float((shifted(h) - shifted(-h)) / (2 * h))
         analytic = float(getattr(grads[arg], where[0])[tuple(where[1:])] if where and isinstance(where[0], str)
                          else grads[arg][where])
+        print(arg, where, f"relative difference {abs(analytic - numeric) / abs(numeric):.1e}")
         assert abs(analytic - numeric) <= 1e-2 * abs(numeric), (arg, where, analytic, numeric)
         assert abs(numeric) > 1e-7, (arg, where)
 
 
 def test_gradients_through_the_fit_match_finite_differences(x64, default_model_dir):
     """At the defaults (float64, weak perspective): d(fitted right wrist, camera)/d(keypoints, confidences, start,
-    camera) by implicit differentiation, against central differences of the converged fits (measured within
-    3e-3 relative; on the frame of seed 11 a 0.1 px nudge moves some fits into another minimum, so differences
-    there say nothing); an unseen keypoint's position has no gradient."""
+    camera) by implicit differentiation, against central differences of the converged fits (on the frame of
+    seed 11 a 0.1 px nudge moves some fits into another minimum, so differences there say nothing); an unseen
+    keypoint's position has no gradient."""
     model = load64(default_model_dir)
     kp, init = synthetic64(model, seed=3, noise_px=1.0, drop=0.15)
-    camera = jnp.asarray([408.0, 481.0, 542.0])  # near the weak-perspective start
+    camera = jnp.asarray([408.0, 481.0, 542.0])  # the solve's start camera (scale, tx, ty)
 
     @jax.jit
     def wrist_and_converged(kp, init, camera):
@@ -70,7 +71,7 @@ def test_gradients_through_the_fit_match_finite_differences(x64, default_model_d
 def test_gradients_through_a_real_frames_fit_match_finite_differences(x64, default_model_dir):
     """The same at the defaults on a real frame (frame 0 of the shipped cam01 clip, as the run observed it: our
     detector's keypoints, the run's start, its pinhole camera): d(fitted right wrist, depth)/d(keypoints,
-    confidences, start, focal length), measured within 1.3e-3 relative."""
+    confidences, start, focal length)."""
     model = load64(default_model_dir)
     data = np.load(Path(__file__).parent / "data" / "pose2sim_cam01_f000_observed.npz")
     kp = jnp.asarray(data["keypoints"], jnp.float64)
@@ -88,7 +89,7 @@ def test_gradients_through_a_real_frames_fit_match_finite_differences(x64, defau
     grads, converged = jax.jit(jax.grad(wrist_and_converged, argnums=(0, 1, 2), has_aux=True))(kp, init, focal)
     assert bool(converged)
     seen = np.flatnonzero(np.asarray(kp[:, 2]) > 0)
-    probes = [(0, (int(seen[3]), 0), 0.1), (0, (int(seen[3]), 1), 0.1), (0, (int(seen[21]), 0), 0.1),
+    probes = [(0, (int(seen[3]), 0), 0.1), (0, (int(seen[3]), 1), 0.1), (0, (int(seen[20]), 0), 0.1),
               (0, (int(seen[9]), 2), 0.01), (1, ("body_pose", 17, 1), 0.01), (1, ("global_orient", 0), 0.01),
               (2, (), 10.0)]
     _assert_matches_central_differences(lambda *a: wrist_and_converged(*a)[0], grads, (kp, init, focal), probes)
