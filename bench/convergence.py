@@ -32,9 +32,11 @@ CLIPS = {"cam01": ROOT / "jaxmocap/data/pose2sim_single_cam01.mp4",
 def observed_sets(model) -> dict[str, dict]:
     """Per clip and person: keypoints (N, 67, 3), the run's start (full pose, betas) and its lens, every other frame
     where the person was found."""
+    from jaxmocap.integrate.fitting import full_pose_of
+    from jaxmocap.motion import lens, read_motion
     from jaxmocap.pipeline.config import RunConfig
     from jaxmocap.pipeline.job import run_bodies
-    from jaxmocap.pipeline.stages import initial_bodies, lens_of
+    from jaxmocap.pipeline.stages import initial_bodies
 
     sets = {}
     for name, clip in CLIPS.items():
@@ -43,22 +45,18 @@ def observed_sets(model) -> dict[str, dict]:
         def observed(chunk, people, parts=parts):
             for pid, obs in people.items():
                 start = initial_bodies(model, obs)
-                parts.setdefault(pid, []).append((obs.keypoints, np.asarray(jax.vmap(type(start).full_pose)(start)),
+                parts.setdefault(pid, []).append((obs.keypoints, np.asarray(full_pose_of(start)),
                                                   np.asarray(start.betas), obs.found))
 
         with tempfile.TemporaryDirectory() as work:
-            run_bodies(RunConfig(str(clip), overlay=False, progress=False), work, observed=observed)
-        import cv2
-
-        capture = cv2.VideoCapture(str(clip))
-        size = (int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-        capture.release()
+            report = run_bodies(RunConfig(str(clip), overlay=False, progress=False), work, observed=observed)
+            run_lens = lens(read_motion(report.motion))  # the pinhole camera the run fitted through
         people = {pid: [np.concatenate(a) for a in zip(*chunks)] for pid, chunks in parts.items()}
         people = {pid: arrays for pid, arrays in people.items() if arrays[3].sum() >= 10}  # not passers-by
         for pid, (keypoints, pose, betas, found) in people.items():
             keep = np.flatnonzero(found)[::2]
             label = name if len(people) == 1 else f"{name} #{pid}"
-            sets[label] = dict(keypoints=keypoints[keep], pose=pose[keep], betas=betas[keep], lens=lens_of(size))
+            sets[label] = dict(keypoints=keypoints[keep], pose=pose[keep], betas=betas[keep], lens=run_lens)
     return sets
 
 
@@ -80,7 +78,7 @@ def main():
 
     dtype = np.float64 if args.x64 else np.float32
     model = smplx_jax.load_model(smplx_jax.default_model_path(), dtype=dtype)
-    sets = observed_sets(smplx_jax.load_model(smplx_jax.default_model_path()))
+    sets = observed_sets(smplx_jax.load_model(smplx_jax.default_model_path()) if args.x64 else model)
     problem = synthetic.make_problem(model, 64, seed=1)
     rows = []
     for steps in args.steps:
