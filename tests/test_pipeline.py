@@ -238,7 +238,7 @@ def _degrees_between(a, b):
 def test_body_mode_runs_no_hand_model_and_keeps_the_whole_modes_body(result, tmp_path, monkeypatch):
     """``--mode body`` (FrankMocap's body demo): no hand detector, no hand IK; flat, unseen hands; the body of the
     whole mode but where the hands move it: the wrists (their rotation is the hand's) and a little the arms (frames
-    20-27: global orientation within 5.3 degrees, the other body joints within 6.5, 0.3 on average)."""
+    20-27: global orientation within 6.7 degrees, the other body joints within 7.9, 0.45 on average)."""
     _no_hand_model(monkeypatch)
     out, _ = result
     report = run(CLIP, tmp_path, mode="body", start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False,
@@ -255,7 +255,7 @@ def test_body_mode_runs_no_hand_model_and_keeps_the_whole_modes_body(result, tmp
     joints = np.delete(_degrees_between(body["body_pose"], whole["body_pose"]), wrists, axis=1)
     print(f"global orientation within {orient.max():.2f} degrees, other joints {joints.max():.2f}, mean "
           f"{joints.mean():.3f}")
-    assert orient.max() < 1.5 * 5.3 and joints.max() < 1.5 * 6.5 and joints.mean() < 1.5 * 0.3
+    assert orient.max() < 1.5 * 6.7 and joints.max() < 1.5 * 7.9 and joints.mean() < 1.5 * 0.45
 
 
 def test_interrupted_run_resumes_to_the_same_motion(result, tmp_path, monkeypatch):

@@ -3,7 +3,7 @@
 Detector (``PoseDetectionCpu``): whole image letterboxed to 224, values in [-1, 1], zero border; SSD anchors
 (5 layers, strides 8/16/32/32/32); keypoints 0 (mid hip) and 1 (scale/rotation) give the ROI (``PoseDetectionToRoi``:
 target angle 90°, ×1.25, square long). Landmarks (``PoseLandmarkByRoiCpu``): ROI warped to 256, values in [0, 1],
-replicated border; 39 landmarks × (x, y, z, visibility, presence), heatmap refinement (kernel 7), presence ≥ 0.5.
+replicated border; 39 landmarks × (x, y, z, visibility, presence), heatmap refinement (kernel 9), presence ≥ 0.5.
 Tracking (``PoseLandmarksToRoi``): auxiliary landmarks 33 (centre) and 34 (scale) give the next ROI.
 """
 
@@ -20,7 +20,9 @@ from .ssd import Detection, decode, remove_letterbox, ssd_anchor_centers, weight
 DETECTOR_SIZE = 224
 LANDMARK_SIZE = 256
 ROI_SCALE = 1.25
-HEATMAP_KERNEL = 7
+# the refinement's window: its options' default, 9, is what 0.10.21's legacy graph runs (measured on 14 stills:
+# 9 reproduces its landmarks to 1e-4 of a heatmap cell, the 7 of its .pbtxt misses by 0.07 cells, ~1.5 px)
+HEATMAP_KERNEL = 9
 MIN_DETECTION_SCORE = 0.5
 MIN_PRESENCE = 0.5
 
