@@ -5,8 +5,12 @@ from the longest run of frames without such a turn outwards, a frame across one 
 neighbour's rotations of the joints that turned (`_start`), the person's shape held, and takes that fit where it
 reprojects no farther from the keypoints than the frame's own: the ambiguity resolved as in the frames beside it.
 A turn the image demands (the refit reprojects farther) stays. (Letting refits reproject 10% or 1 px farther took
-cam01 from 61.0 to 63.8-65.2 mm PA-MPJPE: poses the image does not support.)
+cam01 from 61.0 to 63.8-65.2 mm PA-MPJPE: poses the image does not support.) A frame that keeps its fit takes
+the twists of its turned bones from the neighbour (`untwisted`): a twist handed between a joint and its child (a
+thigh turned one way about itself and the shin back) moves no keypoint, so the image cannot choose it.
 """
+
+import dataclasses
 
 import jax
 import numpy as np
@@ -15,10 +19,14 @@ import smplx_jax
 from jaxmocap.integrate import FitConfig, fit
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.pipeline.records import Bodies
-from smplx_jax.rotations import rotvec_to_rotmat
+from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
 TURN_DEG = 45.0  # a body joint turning more than this from one frame to the next
 WRISTS = (20, 21)  # SMPL-X joints
+# (joint, its one child) of the body's 22 SMPL-X joints, parents first: hips to feet, the spine, neck and head,
+# collars to wrists (the pelvis, the top of the spine, the wrists have several children; the feet and head none)
+BONES = ((1, 4), (2, 5), (3, 6), (4, 7), (5, 8), (6, 9), (7, 10), (8, 11), (12, 15), (13, 16), (14, 17), (16, 18),
+         (17, 19), (18, 20), (19, 21))
 
 
 def body_rotmats(global_orient: np.ndarray, body_pose: np.ndarray) -> np.ndarray:
@@ -33,6 +41,47 @@ def turns_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     sin = 0.5 * np.linalg.norm(np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
                                          r[..., 1, 0] - r[..., 0, 1]], -1), axis=-1)
     return np.degrees(np.arctan2(sin, 0.5 * (np.trace(r, axis1=-2, axis2=-1) - 1.0)))
+
+
+def _about(axis: np.ndarray, angle: float) -> np.ndarray:
+    """The rotation (3, 3) by ``angle`` radians about the unit ``axis``."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * k @ k
+
+
+def _twist_angle(rotmat: np.ndarray, axis: np.ndarray) -> float:
+    """The angle, radians, of the twist about the unit ``axis`` in ``rotmat`` (its swing-twist decomposition:
+    ``2 atan2(v . axis, w)`` of its quaternion ``(w, v)``)."""
+    r = rotmat
+    w = 0.5 * np.sqrt(max(0.0, 1.0 + np.trace(r)))
+    v = 0.5 * np.sqrt(np.maximum(0.0, 1.0 + 2.0 * np.diag(r) - np.trace(r)))
+    v *= np.sign([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    return float(2.0 * np.arctan2(v @ axis, w))
+
+
+def untwisted(rotmats: np.ndarray, neighbour: np.ndarray, bone_axes: np.ndarray, turned: np.ndarray) -> np.ndarray:
+    """A frame's body rotations ``(22, 3, 3)`` where a joint ``turned (22,)`` from the ``neighbour`` frame's by a
+    twist about its bone (`BONES`; the rest direction ``bone_axes (22, 3)``, unit): that twist handed to its child,
+    so the joint no longer turns by more than `TURN_DEG`. Every joint's position and every child's orientation
+    stay, so no keypoint moves; a turn that is not mostly twist (a limb swung) is left as it is."""
+    out = np.array(rotmats, np.float64, copy=True)
+    for joint, child in BONES:
+        if not turned[joint]:
+            continue
+        twist = _about(bone_axes[joint], _twist_angle(out[joint].T @ neighbour[joint], bone_axes[joint]))
+        if turns_deg((out[joint] @ twist)[None], neighbour[joint][None])[0] <= TURN_DEG:
+            out[joint], out[child] = out[joint] @ twist, twist.T @ out[child]
+    return out
+
+
+def bone_axes(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
+    """``(22, 3)``: each `BONES` joint's unit direction to its child in the rest pose of the shape ``betas``."""
+    shape = np.concatenate([betas, np.zeros(model.num_expression, betas.dtype)])
+    rest = np.asarray(model.joint_template, np.float64) + np.asarray(model.joint_shapedirs, np.float64) @ shape
+    axes = np.zeros((22, 3))
+    for joint, child in BONES:
+        axes[joint] = (rest[child] - rest[joint]) / np.linalg.norm(rest[child] - rest[joint])
+    return axes
 
 
 def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.ndarray):
@@ -70,6 +119,7 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
     out = bodies
     steps = [(frames[i], frames[i - 1]) for i in range(longest[-1] + 1, len(frames))] + [
         (frames[i], frames[i + 1]) for i in range(longest[0] - 1, -1, -1)]
+    axes = bone_axes(model, np.asarray(bodies.params.betas[frames[0]], np.float64))
     for k, neighbour in steps:
         turned = turns_deg(rotmats[k], rotmats[neighbour]) > TURN_DEG
         if not turned.any():
@@ -85,4 +135,16 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
         if bool(result.valid[0]) and error <= errors[k]:
             out = jax.tree.map(lambda a, b: np.concatenate([a[:k], b, a[k + 1:]]), out, refit)
             rotmats[k] = body_rotmats(refit.params.global_orient, refit.params.body_pose)[0]
+        else:  # the frame keeps its fit, with the turned bones' twists the neighbour's (no keypoint moves)
+            rotmats[k] = untwisted(rotmats[k], rotmats[neighbour], axes, turned)
+            out = _with_body_rotations(out, k, rotmats[k])
     return out
+
+
+def _with_body_rotations(bodies: Bodies, k: int, rotmats: np.ndarray) -> Bodies:
+    """``bodies`` with frame ``k``'s global orientation and body pose those of ``rotmats (22, 3, 3)``."""
+    rotvecs = np.asarray(rotmat_to_rotvec(np.asarray(rotmats, np.float32)))
+    params = bodies.params
+    global_orient, body_pose = np.array(params.global_orient), np.array(params.body_pose)
+    global_orient[k], body_pose[k] = rotvecs[0], rotvecs[1:]
+    return dataclasses.replace(bodies, params=params.replace(global_orient=global_orient, body_pose=body_pose))
