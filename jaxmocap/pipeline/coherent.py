@@ -51,12 +51,19 @@ def _about(axis: np.ndarray, angle: float) -> np.ndarray:
 
 def _twist_angle(rotmat: np.ndarray, axis: np.ndarray) -> float:
     """The angle, radians, of the twist about the unit ``axis`` in ``rotmat`` (its swing-twist decomposition:
-    ``2 atan2(v . axis, w)`` of its quaternion ``(w, v)``)."""
+    ``2 atan2(v . axis, w)`` of its quaternion ``(w, v)``, taken by Shepperd's method: exact at half a turn)."""
     r = rotmat
-    w = 0.5 * np.sqrt(max(0.0, 1.0 + np.trace(r)))
-    v = 0.5 * np.sqrt(np.maximum(0.0, 1.0 + 2.0 * np.diag(r) - np.trace(r)))
-    v *= np.sign([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    return float(2.0 * np.arctan2(v @ axis, w))
+    largest = int(np.argmax([np.trace(r), r[0, 0], r[1, 1], r[2, 2]]))
+    if largest == 0:
+        s = 2.0 * np.sqrt(1.0 + np.trace(r))
+        w, v = s / 4, np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / s
+    else:
+        i = largest - 1
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
+        w, v = (r[k, j] - r[j, k]) / s, np.empty(3)
+        v[i], v[j], v[k] = s / 4, (r[j, i] + r[i, j]) / s, (r[k, i] + r[i, k]) / s
+    return float(2.0 * np.arctan2(np.sign(w or 1.0) * (v @ axis), abs(w)))  # the quaternion with w >= 0
 
 
 def untwisted(rotmats: np.ndarray, neighbour: np.ndarray, bone_axes: np.ndarray, turned: np.ndarray) -> np.ndarray:
