@@ -83,8 +83,7 @@ def untwisted(rotmats: np.ndarray, neighbour: np.ndarray, bone_axes: np.ndarray,
 
 def bone_axes(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
     """``(22, 3)``: each `BONES` joint's unit direction to its child in the rest pose of the shape ``betas``."""
-    shape = np.concatenate([betas, np.zeros(model.num_expression, betas.dtype)])
-    rest = np.asarray(model.joint_template, np.float64) + np.asarray(model.joint_shapedirs, np.float64) @ shape
+    rest = np.asarray(model.joint_template, np.float64) + np.asarray(model.joint_shapedirs)[..., :len(betas)] @ betas
     axes = np.zeros((22, 3))
     for joint, child in BONES:
         axes[joint] = (rest[child] - rest[joint]) / np.linalg.norm(rest[child] - rest[joint])
@@ -143,8 +142,9 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
             out = jax.tree.map(lambda a, b: np.concatenate([a[:k], b, a[k + 1:]]), out, refit)
             rotmats[k] = body_rotmats(refit.params.global_orient, refit.params.body_pose)[0]
         else:  # the frame keeps its fit, with the turned bones' twists the neighbour's (no keypoint moves)
-            rotmats[k] = untwisted(rotmats[k], rotmats[neighbour], axes, turned)
-            out = _with_body_rotations(out, k, rotmats[k])
+            handed = untwisted(rotmats[k], rotmats[neighbour], axes, turned)
+            if not np.array_equal(handed, rotmats[k]):  # a bone handed its twist on
+                rotmats[k], out = handed, _with_body_rotations(out, k, handed)
     return out
 
 
