@@ -89,7 +89,9 @@ def test_gradients_through_a_real_frames_fit_match_finite_differences(x64, defau
     grads, converged = jax.jit(jax.grad(wrist_and_converged, argnums=(0, 1, 2), has_aux=True))(kp, init, focal)
     assert bool(converged)
     seen = np.flatnonzero(np.asarray(kp[:, 2]) > 0)
-    probes = [(0, (int(seen[3]), 0), 0.1), (0, (int(seen[3]), 1), 0.1), (0, (int(seen[20]), 0), 0.1),
+    # keypoints moved by 0.3 px: the fit ends within its tolerance of the optimum, which moves differences of 0.1 px
+    # by up to 2% here (0.3, 0.1, 0.03 px: 0.000552, 0.000540, 0.000555 against the implicit 0.000552)
+    probes = [(0, (int(seen[3]), 0), 0.3), (0, (int(seen[3]), 1), 0.3), (0, (int(seen[20]), 0), 0.3),
               (0, (int(seen[9]), 2), 0.01), (1, ("body_pose", 17, 1), 0.01), (1, ("global_orient", 0), 0.01),
               (2, (), 10.0)]
     _assert_matches_central_differences(lambda *a: wrist_and_converged(*a)[0], grads, (kp, init, focal), probes)

@@ -44,6 +44,10 @@ _FINGER_RANGE = tuple((j, axis, -sign, 1.75) for j, axis, sign in FINGER_BACKWAR
     (first + k, 1, sign, 0.35) for first in (25, 40) for k in FINGER_JOINTS[::3] for sign in (1.0, -1.0))
 BEND_LIMITS = ((18, 1, 1.0, 0.0), (19, 1, -1.0, 0.0), (4, 0, -1.0, 0.0), (5, 0, -1.0, 0.0)) + tuple(
     (j, axis, sign, 0.1) for j, axis, sign in FINGER_BACKWARDS) + _FINGER_RANGE
+# Radians inside a limit within which the solver's model keeps the limit's stiffness once a refused step crossed it
+# (`levenberg_marquardt`): the one-sided term has no curvature until crossed, so steps from just inside it landed
+# far beyond, were refused, and fits pressed against a finger's limit crawled (docs/BENCHMARKS.md).
+BEND_MARGIN = 0.03
 _BEND_JOINT, _BEND_AXIS, _BEND_SIGN, _BEND_SLACK = (list(c) for c in zip(*BEND_LIMITS))  # lists: no cached dtypes
 
 
@@ -54,7 +58,7 @@ def bend_weights(config, dtype=np.float32) -> np.ndarray:
                     config.prior_finger_range).astype(dtype)
 
 
-def _bend(pose):
+def bend_of(pose: Float[Array, "55 3"]) -> Float[Array, "L"]:
     """``sign * theta[joint, axis] - slack`` of each bending limit: positive is hyper-extension."""
     return jnp.asarray(_BEND_SIGN, pose.dtype) * pose[_BEND_JOINT, _BEND_AXIS] - jnp.asarray(_BEND_SLACK, pose.dtype)
 
@@ -172,17 +176,20 @@ def residuals(y: Unknowns, problem: Problem, config: SolverConfig) -> Residuals:
     sref = problem.scale_ref
     return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(cauchy_u(r, problem, config))),
                      sref * problem.prior * (pose - problem.pose0), sref * config.prior_betas * betas,
-                     sref * bend_weights(config, pose.dtype) * jax.nn.relu(_bend(pose)))
+                     sref * bend_weights(config, pose.dtype) * jax.nn.relu(bend_of(pose)))
 
 
-def prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Unknowns]:
-    """The gradient and the (Gauss-Newton, diagonal) Hessian of the priors' half sum of squares."""
+def prior_quadratic(pose, betas, camera, problem: Problem, config: SolverConfig, stiff=None
+                    ) -> tuple[Unknowns, Unknowns]:
+    """The gradient and the (Gauss-Newton, diagonal) Hessian of the priors' half sum of squares; ``stiff`` (L,)
+    bool: limits whose stiffness the Hessian holds within `BEND_MARGIN` inside them too."""
     sref = problem.scale_ref
     pose_weight = (sref * problem.prior) ** 2
-    bend_weight, bend = (sref * bend_weights(config, pose.dtype)) ** 2, _bend(pose)
+    bend_weight, bend = (sref * bend_weights(config, pose.dtype)) ** 2, bend_of(pose)
     gradient = (pose_weight * (pose - problem.pose0)).at[_BEND_JOINT, _BEND_AXIS].add(
         bend_weight * jax.nn.relu(bend) * jnp.asarray(_BEND_SIGN, pose.dtype))
-    hessian = pose_weight.at[_BEND_JOINT, _BEND_AXIS].add(bend_weight * (bend > 0))
+    held = bend > 0 if stiff is None else (bend > 0) | (stiff & (bend > -BEND_MARGIN))
+    hessian = pose_weight.at[_BEND_JOINT, _BEND_AXIS].add(bend_weight * held)
     betas_weight = jnp.full_like(betas, (sref * config.prior_betas) ** 2)
     return (Unknowns(gradient, betas_weight * betas, jnp.zeros_like(camera)),
             Unknowns(hessian, betas_weight, jnp.zeros_like(camera)))

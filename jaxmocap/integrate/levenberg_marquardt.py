@@ -3,9 +3,11 @@
 Each step takes the model of the cost at the current point (`local_model`: the keypoint errors weighted by
 Cauchy's ``rho' = conf / (1 + u)``, the analytic Jacobian of `keypoints` and of the projection, the priors),
 solves ``(H + mu diag(H)) delta = -g`` and keeps the step if the cost falls; ``mu`` follows Nielsen's rule on the
-ratio of the actual to the predicted decrease. Steps move each rotation by a local increment, ``R_j <- exp(dphi_j)
-R_j`` (`retract`), not its axis-angle by addition: a joint turned one way and its child turned back (a body turning
-on the spot, a neck and head) stay aligned over a whole step, where axis-angle steps drift off that valley.
+ratio of the actual to the predicted decrease. A bending limit has no curvature until crossed: once a refused dense
+step crossed one, the model holds its stiffness while the fit stays pressed against it (`least_squares.BEND_MARGIN`).
+Steps move each rotation by a local increment, ``R_j <- exp(dphi_j) R_j`` (`retract`), not its axis-angle by
+addition: a joint turned one way and its child turned back (a body turning on the spot, a neck and head) stay
+aligned over a whole step, where axis-angle steps drift off that valley.
 ``SolverConfig.linear_solver`` says how the system is solved:
 
 * ``"cholesky"`` (default): exactly, by a dense Cholesky factorisation over the unknowns the solve moves (some
@@ -40,9 +42,12 @@ from jaxtyping import Array, Bool, Float
 from jaxmocap.integrate import keypoints, mat3
 from jaxmocap.integrate.keypoints import KeypointModel, Linearization
 from jaxmocap.integrate.least_squares import (
+    BEND_LIMITS,
+    BEND_MARGIN,
     Problem,
     SolverConfig,
     Unknowns,
+    bend_of,
     cauchy_u,
     pose_and_shape,
     prior_quadratic,
@@ -127,10 +132,10 @@ class LocalModel(NamedTuple):
     blocks: Blocks | None
 
 
-def _prior_blocks(pose, betas, camera, problem: Problem, config: SolverConfig) -> tuple[Unknowns, Blocks]:
+def _prior_blocks(pose, betas, camera, problem: Problem, config: SolverConfig, stiff) -> tuple[Unknowns, Blocks]:
     """The priors' gradient and Gauss-Newton Hessian in the local increments of the rotations: the axis-angle
     moves by ``J_l(theta)^-1 dphi``, so a joint's diagonal block ``D`` becomes ``J_l^-T D J_l^-1``."""
-    gradient, hessian = prior_quadratic(pose, betas, camera, problem, config)
+    gradient, hessian = prior_quadratic(pose, betas, camera, problem, config, stiff)
     to_theta = mat3.inverse(jnp.transpose(mat3.left_jacobian(pose), (1, 2, 0)))  # (3, 3, 55)
     pose_block = mat3.matmul(jnp.swapaxes(to_theta, 0, 1), hessian.pose_rotvecs.T[:, None] * to_theta)
     c = camera.shape[0]
@@ -138,8 +143,10 @@ def _prior_blocks(pose, betas, camera, problem: Problem, config: SolverConfig) -
             Blocks(pose_block, hessian.betas, jnp.zeros((c, c), camera.dtype)))
 
 
-def local_model(y: Unknowns, problem: Problem, config: SolverConfig) -> LocalModel:
-    """The model at ``y`` in the local increments of the rotations (``R_j <- exp(dphi_j) R_j``, `retract`)."""
+def local_model(y: Unknowns, problem: Problem, config: SolverConfig, stiff: Bool[Array, "L"] | None = None
+                ) -> LocalModel:
+    """The model at ``y`` in the local increments of the rotations (``R_j <- exp(dphi_j) R_j``, `retract`);
+    ``stiff``: the bending limits whose stiffness it holds just inside them too (`prior_quadratic`)."""
     d = problem.target.shape[1]
     km, joints = problem.km, solved_joints(config)
     pose, betas = pose_and_shape(y, problem)
@@ -160,7 +167,7 @@ def local_model(y: Unknowns, problem: Problem, config: SolverConfig) -> LocalMod
     moving[joints] = 1.0
     mask = Unknowns(jnp.broadcast_to((problem.free * moving)[:, None], pose.shape),
                     jnp.broadcast_to(problem.fit_betas, betas.shape), jnp.ones_like(y.camera))
-    prior_gradient, prior = _prior_blocks(pose, betas, y.camera, problem, config)
+    prior_gradient, prior = _prior_blocks(pose, betas, y.camera, problem, config, stiff)
 
     def jv(v: Unknowns):  # (D, K)
         dx = keypoints.jvp(km, lin, v.pose_rotvecs * mask.pose_rotvecs, v.betas * mask.betas, exact=False)
@@ -296,6 +303,7 @@ class _State(eqx.Module):
     last_step: Float[Array, "n"]  # the step that led here, when it was taken (``stepped``)
     last_gradient: Float[Array, "n"]  # the gradient where it started
     stepped: Bool[Array, ""]  # whether the last step was taken (the pair then updates S)
+    stiff: Bool[Array, "L"]  # bending limits a refused step crossed, while within BEND_MARGIN inside and pressed
 
 
 class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
@@ -315,10 +323,10 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         n = _flat(y, self.config).shape[0] if self.config.linear_solver == "cholesky" else 0
         zero = jnp.zeros(n, cost.dtype)
         return _State(cost, self.config.initial_damping * one, 2.0 * one, jnp.array(False),
-                      jnp.zeros((n, n), cost.dtype), zero, zero, jnp.array(False))
+                      jnp.zeros((n, n), cost.dtype), zero, zero, jnp.array(False), jnp.zeros(len(BEND_LIMITS), bool))
 
     def step(self, fn, y, args, options, state, tags):
-        model = local_model(y, args, self.config)
+        model = local_model(y, args, self.config, state.stiff)
         secant = state.secant
         if model.dense is not None:
             gradient = _flat(model.gradient, self.config)
@@ -334,6 +342,11 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
         ratio = (state.cost - cost) / predicted
         converged = (predicted <= self.rtol * state.cost) & (state.damping <= 1.0)
+        stiff = state.stiff  # the pipeline's few CG steps as they were (no better on the real views with it)
+        if model.dense is not None:
+            before, after = bend_of(pose_and_shape(y, args)[0]), bend_of(pose_and_shape(trial, args)[0])
+            stiff = jnp.where(accept, stiff & (after > -BEND_MARGIN) & (after >= before),
+                              stiff | ((before <= 0) & (after > 0)))
         damping = jnp.where(accept, state.damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3),
                             state.damping * state.growth)
         if model.dense is not None:
@@ -344,7 +357,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             last_step, last_gradient = state.last_step, state.last_gradient
         new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING),
                      jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged,
-                     secant, last_step, last_gradient, accept)
+                     secant, last_step, last_gradient, accept, stiff)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):
