@@ -342,19 +342,17 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
         ratio = (state.cost - cost) / predicted
         converged = (predicted <= self.rtol * state.cost) & (state.damping <= 1.0)
-        stiff = state.stiff  # the pipeline's few CG steps as they were (no better on the real views with it)
-        if model.dense is not None:
-            before, after = bend_of(pose_and_shape(y, args)[0]), bend_of(pose_and_shape(trial, args)[0])
-            stiff = jnp.where(accept, stiff & (after > -BEND_MARGIN) & (after >= before),
-                              stiff | ((before <= 0) & (after > 0)))
         damping = jnp.where(accept, state.damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3),
                             state.damping * state.growth)
         if model.dense is not None:
             secant = jnp.where(~accept & augmented & (ratio < 0.25), 0.5 * secant, secant)
             last_step = jnp.where(accept, flat, state.last_step)
             last_gradient = jnp.where(accept, gradient, state.last_gradient)
-        else:
-            last_step, last_gradient = state.last_step, state.last_gradient
+            before, after = bend_of(pose_and_shape(y, args)[0]), bend_of(pose_and_shape(trial, args)[0])
+            stiff = jnp.where(accept, state.stiff & (after > -BEND_MARGIN) & (after >= before),
+                              state.stiff | ((before <= 0) & (after > 0)))
+        else:  # the pipeline's few CG steps hold no limit's stiffness (no better on the real views with it)
+            last_step, last_gradient, stiff = state.last_step, state.last_gradient, state.stiff
         new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING),
                      jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged,
                      secant, last_step, last_gradient, accept, stiff)
