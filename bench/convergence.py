@@ -2,13 +2,14 @@
 N steps (`FitResult.converged`), with the median final reprojection error, on synthetic frames and on the real frames
 of the shipped clips as a run observes them (our detector's keypoints, the run's IK start, its pinhole camera).
 
-    python bench/convergence.py [--steps 20 100 200] [--x64] [--quick] [--out bench/results]
+    python bench/convergence.py [--steps 20 100 200 400] [--x64] [--quick] [--out bench/results]
                                                             (or: jaxmocap bench --only convergence)
 
 Real sets: every other frame of cam01 and cam03 of the single-person take and of each person of the two-person take
 (each clip run once, `run_bodies` with an observer, in a temporary folder). Synthetic: 64 frames of
 `jaxmocap.integrate.synthetic` (2 px noise, 15% of keypoints dropped, a perturbed start), weak perspective.
-``--x64``: the same in float64 (the model loaded in float64). ``--quick``: 100 steps alone (the default cap).
+``--x64``: the same in float64 (the model loaded in float64). ``--quick``: the default cap alone
+(`fitting.ITERATIONS`).
 """
 
 from __future__ import annotations
@@ -62,20 +63,20 @@ def observed_sets(model) -> dict[str, dict]:
 
 def main():
     parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, nargs="*", default=[20, 100, 200])
+    parser.add_argument("--steps", type=int, nargs="*", default=[20, 100, 200, 400])
     parser.add_argument("--x64", action="store_true")
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     args = parser.parse_args()
-    if args.quick:
-        args.steps = [100]
     if args.x64:
         jax.config.update("jax_enable_x64", True)
 
     import smplx_jax
     from jaxmocap.integrate import fit, synthetic
-    from jaxmocap.integrate.fitting import params_from_full_pose
+    from jaxmocap.integrate.fitting import ITERATIONS, params_from_full_pose
 
+    if args.quick:
+        args.steps = [ITERATIONS]
     dtype = np.float64 if args.x64 else np.float32
     model = smplx_jax.load_model(smplx_jax.default_model_path(), dtype=dtype)
     sets = observed_sets(smplx_jax.load_model(smplx_jax.default_model_path()) if args.x64 else model)

@@ -251,8 +251,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("keypoints", type=Path, help="folder of OpenPose JSON files, one per frame (sorted by name)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
-    p.add_argument("--iterations", type=int, default=100,  # fitting.ITERATIONS (jax not imported here)
-                   help="the cap on Levenberg-Marquardt steps; each frame stops once converged (default: %(default)s)")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="the cap on Levenberg-Marquardt steps; each frame stops once converged (default: the fit's "
+                        "own, jaxmocap.integrate.fitting.ITERATIONS)")
     p.add_argument("--init", type=Path, default=None, help="motion.npz to start from (same frames)")
     p.add_argument("--smooth", action="store_true", help="temporal smoothing, kernel [0.1, 0.2, 0.5, 0.2, 0.1]")
     p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None,

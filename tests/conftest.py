@@ -35,9 +35,9 @@ def pytest_configure(config):
         os.environ["JAXMOCAP_TEST_CACHE"] = tempfile.mkdtemp(prefix="jaxmocap-tests-")
     cache = str(Path(os.environ["JAXMOCAP_TEST_CACHE"]) / "xla")
     os.environ["JAX_COMPILATION_CACHE_DIR"] = cache
-    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
     jax.config.update("jax_compilation_cache_dir", cache)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
 
 
 def pytest_unconfigure(config):

@@ -68,10 +68,11 @@ def infer_image_size(keypoints: np.ndarray) -> tuple[int, int]:
     return tuple(max(2, 2 * math.ceil((float(np.max(xy[:, i])) + 1) / 2)) for i in range(2))
 
 
-def fit_keypoint_folder(keypoints_dir, out_dir, *, model_path=None, iterations: int = fitting.ITERATIONS, init=None,
+def fit_keypoint_folder(keypoints_dir, out_dir, *, model_path=None, iterations: int | None = None, init=None,
                         smooth: bool = False, image_size=None, fps: float = 30.0, progress: bool = True) -> Path:
     files, keypoints = read_keypoint_folder(keypoints_dir)
     keypoints = np.where(np.isfinite(keypoints).all(-1, keepdims=True), keypoints, 0.0).astype(np.float32)
+    iterations = fitting.ITERATIONS if iterations is None else iterations
     if iterations < 0:
         raise InputError(f"--iterations must be >= 0, got {iterations}")
     model_path = Path(model_path) if model_path else smplx_jax.default_model_path()
