@@ -35,8 +35,8 @@ from smplx_jax import BodyModel, SMPLXParams, constants
 
 BUCKETS = (1, 8, 32, 64)  # padded batch sizes; longer inputs run in chunks of 64 (faster here than 1024: cache)
 MIN_KEYPOINTS = 3  # fewer visible keypoints: the frame has no person to fit
-ITERATIONS = 400  # the default cap on steps: every frame of the shipped clips and synthetic sets converges within
-# it, float32 within 200, float64 within 400 (bench/convergence.py; docs/BENCHMARKS.md)
+ITERATIONS = 400  # the default cap on steps: every frame of the shipped clips and bench/convergence.py's synthetic
+# set converges within it, float32 and float64 (98-99% of bench/fit.py's harder set; docs/BENCHMARKS.md)
 
 OK, NO_KEYPOINTS, FAILED = 0, 1, 2  # FitResult.status
 
