@@ -4,9 +4,11 @@
 import dataclasses
 import functools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 import pytest
 
 import smplx_jax
@@ -135,3 +137,20 @@ def test_jit_equals_eager(x64, default_model_dir):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
     assert int(eager.status) == fitting.OK and not bool(eager.converged)  # 5 steps: cut short
     assert float(eager.reprojection_error_px) < 0.5 * float(eager.initial_reprojection_error_px)
+
+
+def test_a_solve_stalled_at_its_damping_cap_stops_unconverged(x64, default_model_dir):
+    """Once refused steps have raised the damping to its cap, the solve stops (in float32 the later steps would
+    all be refused in place, holding up the batch: `levenberg_marquardt.stalled`), reported not converged."""
+    model = load64(default_model_dir)
+    km = fitting.openpose_keypoint_model(model)
+    kp, init = synthetic64(model, seed=3)
+    config = fitting.FitConfig()
+    problem, start, _ = fitting._problem(km, kp, init.full_pose(), init.betas, None,
+                                         fitting.lens_arrays(None, None, jnp.float64), config, None, None)
+    solver = levenberg_marquardt.LevenbergMarquardt(config, levenberg_marquardt.default_tolerance(jnp.float64))
+    state = levenberg_marquardt.initial_state(problem, start, config)
+    assert not bool(solver.terminate(None, start, problem, {}, state, frozenset())[0])
+    stalled = eqx.tree_at(lambda s: s.damping, state, jnp.asarray(levenberg_marquardt.MAX_DAMPING, jnp.float64))
+    stop, result = solver.terminate(None, start, problem, {}, stalled, frozenset())
+    assert bool(stop) and result == optx.RESULTS.nonlinear_max_steps_reached

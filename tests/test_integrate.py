@@ -137,9 +137,10 @@ def test_a_pinhole_fit_recovers_a_near_body_and_its_place(model):
     near = synthetic.make_problem(model, T, seed=4, noise_px=0.0, drop=0.15, focal_length=900.0)
     centre = np.array(synthetic.IMAGE_SIZE) / 2
     pinhole = fit(model, near.keypoints, near.init, focal_length=900.0, principal_point=centre)
-    compiled = fitting._fit_batch._cache_size()
+    compiled = fitting._start_batch._cache_size(), fitting._result_batch._cache_size()
     weak = fit(model, near.keypoints, near.init)
-    assert fitting._fit_batch._cache_size() == compiled  # the camera is data: one compiled fit for both
+    # the camera is data: one compiled fit for both
+    assert (fitting._start_batch._cache_size(), fitting._result_batch._cache_size()) == compiled
     assert np.all(np.asarray(pinhole.status) == fitting.OK)
     err = np.asarray(pinhole.reprojection_error_px)
     assert np.median(err) <= 0.5, np.median(err)
@@ -165,21 +166,39 @@ def test_a_pinhole_fit_recovers_a_near_body_and_its_place(model):
     assert np.all(weak_error(pinhole.camera_scale, pinhole.camera_trans) <= at_origin * (1 + 1e-4))
 
 
-def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit):
-    before = fitting._fit_batch._cache_size()
+def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit, monkeypatch):
+    """27 frames pad to the bucket of 32; each round of steps runs only the frames still going, in their bucket."""
+    functions = fitting._start_batch, fitting._advance_batch, fitting._result_batch
+
+    def compiled():
+        return [f._cache_size() for f in functions]
+
+    rows, finished = [], []
+    monkeypatch.setattr(fitting, "_advance_batch", lambda km, problem, *rest: rows.append(len(problem.target))
+                        or functions[1](km, problem, *rest))
+    before = compiled()
     sub = jax.tree.map(lambda a: a[:T - 5], noisy.init)
-    r = fit(model, noisy.keypoints[:T - 5], sub)  # 27 frames pad to the same bucket: no new compilation
-    assert fitting._fit_batch._cache_size() == before
+    r = fit(model, noisy.keypoints[:T - 5], sub, progress=finished.append)
+    assert compiled()[::2] == before[::2]  # (a later round's bucket may be new)
+    going = T - 5 - np.cumsum([0] + finished[:-1])
+    assert sum(finished) == T - 5 and rows == [bucket_size(int(n), fitting.BUCKETS) for n in going] and min(rows) < T
+    after = compiled()
+    fit(model, noisy.keypoints[:T - 5], sub)
+    assert compiled() == after  # a second call compiles nothing
     assert bucket_size(T - 5, fitting.BUCKETS) == bucket_size(T, fitting.BUCKETS) == T
-    # padding does not change the frames' results (each frame's fit is independent of the others)
-    np.testing.assert_allclose(r.params.body_pose, noisy_fit.params.body_pose[:T - 5], atol=1e-4)
+    # padding does not change the frames' results: those done in the first round (the same batch of 32) are the
+    # same; the others ran on in other batches, whose float32 sums round in another order, to fits as good (measured
+    # 20 of 27 the same, the others within 0.015 px and 0.024 rad, along directions the keypoints hardly see)
+    same = np.abs(np.asarray(r.params.body_pose) - np.asarray(noisy_fit.params.body_pose[:T - 5])).max((1, 2)) < 1e-6
+    gap = np.abs(np.asarray(r.reprojection_error_px) - np.asarray(noisy_fit.reprojection_error_px[:T - 5]))
+    assert same.sum() >= (T - 5) // 2 and np.asarray(r.converged).all() and gap.max() < 0.03, (same, gap)
 
 
 def test_vmapped_fit_equals_the_fit_of_each_frame_alone(default_model_dir, noisy):
     """vmap = loop, in float64, over 20 steps: in float32 the batched sums round in another order, and the fit's
     accept/reject decisions amplify that along weakly determined directions (frames then differ by up to ~1 px and
     land in different, about equally good minima; the batched fit's accuracy is tested above); run to convergence
-    (the default cap, 100) they agree to the stopping rule's tolerance (~1e-6), not to 1e-8."""
+    they agree to the stopping rule's tolerance (~1e-6), not to 1e-8."""
     frames = np.array([0, 7, 18])
     with jax.enable_x64(True):
         model = smplx_jax.load_model(default_model_dir / "smplx" / "SMPLX_NEUTRAL.npz", dtype=jnp.float64)

@@ -20,12 +20,13 @@ SCRIPT = textwrap.dedent("""
     model = smplx_jax.load_model(smplx_jax.default_model_path(), dtype=np.float64)
     problem = synthetic.make_problem(model, 8, seed=3)
     assert frame_sharding(8) is not None and frame_sharding(1) is None
-    batches, fit_batch = [], fitting._fit_batch
-    fitting._fit_batch = lambda *args: batches.append(fit_batch(*args)) or batches[-1]  # the real one, watched
+    batches, advance_batch = [], fitting._advance_batch
+    fitting._advance_batch = lambda *args: batches.append(advance_batch(*args)) or batches[-1]  # the real one, watched
     config = fitting.FitConfig(linear_solver="cg")  # the pipeline's steps (dense steps sharded: issue 25's note)
     sharded = fit(model, problem.keypoints, init=problem.init, config=config, iterations=20)
-    status = batches[0].status  # the compiled batch ran split over the frames: two on each device
-    assert len(status.sharding.device_set) == 4 and [s.data.shape for s in status.addressable_shards] == [(2,)] * 4
+    assert len(batches) == 1  # one round: 20 steps
+    steps = batches[0][2]  # the compiled steps ran split over the frames: two on each device
+    assert len(steps.sharding.device_set) == 4 and [s.data.shape for s in steps.addressable_shards] == [(2,)] * 4
     # the same compiled batch with everything on one device
     fitting.shard_frames = lambda tree, n: jax.device_put(tree, jax.devices()[0])
     single = fit(model, problem.keypoints, init=problem.init, config=config, iterations=20)
@@ -33,7 +34,7 @@ SCRIPT = textwrap.dedent("""
     b = synthetic.openpose_projection(model, single.params, single.camera_scale, single.camera_trans)
     error_gap = np.abs(np.asarray(sharded.reprojection_error_px) - np.asarray(single.reprojection_error_px))
     print("max projection difference px", float(np.abs(a - b).max()), "error difference px", float(error_gap.max()))
-    assert len(batches[1].status.sharding.device_set) == 1
+    assert len(batches[1][2].sharding.device_set) == 1
     assert np.array_equal(np.asarray(sharded.status), np.asarray(single.status))
     assert sharded.params.body_pose.dtype == np.float64
     assert error_gap.max() < 1e-8 and np.abs(a - b).max() < 1e-6

@@ -9,8 +9,9 @@ pose (weaker for hands; fingers as hinges), shape L2 and the joint limits of elb
 is a pinhole of known focal length (``focal_length`` and ``principal_point``: the body's depth and perspective are
 fitted, ``params.transl`` is its origin in the camera frame) or weak perspective (no focal length). `fit_frame` is
 pure: it works under `jax.jit`, `jax.vmap` and `jax.grad`; gradients of the fitted parameters with respect to the
-keypoints, their confidences, the start and the camera come from implicit differentiation. `fit` jits it once per
-padded batch size (`BUCKETS`; longer inputs run in chunks of the largest) and spreads the frames over all devices.
+keypoints, their confidences, the start and the camera come from implicit differentiation. `fit` runs the same
+steps in jitted batches padded to a few sizes (`BUCKETS`), spread over all devices, in rounds that leave out the
+frames already converged: a batch does not wait on its slowest frame.
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ BUCKETS = (1, 8, 32, 64)  # padded batch sizes; longer inputs run in chunks of 6
 MIN_KEYPOINTS = 3  # fewer visible keypoints: the frame has no person to fit
 ITERATIONS = 400  # the default cap on steps: every frame of the shipped clips and bench/convergence.py's synthetic
 # set converges within it, float32 and float64 (98-99% of bench/fit.py's harder set; docs/BENCHMARKS.md)
+ROUND_STEPS = 50  # `fit` steps its frames in rounds of at most this many (`_solve_frames`)
+SOLVE_FRAMES = 1024  # `fit` solves at most this many frames at a time (their solver states are held in memory)
 
 OK, NO_KEYPOINTS, FAILED = 0, 1, 2  # FitResult.status
 
@@ -93,12 +96,21 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
 
 
 def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint) -> FitResult:
+    problem, start, camera = _problem(km, keypoints, pose, betas, camera, lens, config, free, fit_betas)
+    solution = levenberg_marquardt.solve(problem, start, config, adjoint)
+    converged = solution.result == optx.RESULTS.successful
+    solved = converged | (solution.result == optx.RESULTS.nonlinear_max_steps_reached)
+    return _result(problem, start, camera, solution.value, converged, solved)
+
+
+def _problem(km, keypoints, pose, betas, camera, lens, config, free, fit_betas
+             ) -> tuple[least_squares.Problem, least_squares.Unknowns, Float[Array, "3"]]:
+    """One frame's least-squares problem, its start and the start's camera ``(scale, tx, ty)``."""
     dtype = pose.dtype
     inv_focal, center = lens
     finite = jnp.all(jnp.isfinite(keypoints), axis=-1)
     conf = jnp.where(finite & (keypoints[:, 2] > 0), keypoints[:, 2], 0.0)
     target = jnp.where(finite[:, None], keypoints[:, :2], 0.0)
-    seen = conf > 0
     if camera is None:
         scale, trans = weak_perspective_from_points(keypoints_cm(km, pose, betas)[:2].T, target, conf)
         camera = jnp.concatenate([scale[None], trans])
@@ -106,9 +118,15 @@ def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, 
     problem = least_squares.Problem(km, target, conf, pose, betas, jnp.asarray(prior_weights(config), dtype), sref,
                                     jnp.ones(55, dtype) if free is None else free,
                                     jnp.ones((), dtype) if fit_betas is None else fit_betas, inv_focal, center)
-    start = least_squares.Unknowns(pose, betas, jnp.concatenate([jnp.log(sref)[None], camera[1:]]))
-    solution = levenberg_marquardt.solve(problem, start, config, adjoint)
-    out = solution.value
+    return problem, least_squares.Unknowns(pose, betas, jnp.concatenate([jnp.log(sref)[None], camera[1:]])), camera
+
+
+def _result(problem: least_squares.Problem, start: least_squares.Unknowns, camera, out: least_squares.Unknowns,
+            converged, solved) -> FitResult:
+    """The `FitResult` of a solve of ``problem`` from ``start`` (camera ``(scale, tx, ty)``) that ended at ``out``."""
+    km, target, conf, pose, betas = problem.km, problem.target, problem.conf, problem.pose0, problem.betas0
+    inv_focal, center = problem.inv_focal, problem.center
+    seen = conf > 0
 
     def reprojection_error(pixels):
         err = jnp.linalg.norm(pixels.T - target, axis=-1)
@@ -125,8 +143,6 @@ def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, 
     weak_scale, weak_trans = weak_perspective_least_squares((points + transl[:, None])[:2].T, pixels.T, conf)
     scale, trans = jnp.where(pinhole, weak_scale, scale), jnp.where(pinhole, weak_trans, trans)
     enough = jnp.sum(seen) >= MIN_KEYPOINTS
-    converged = solution.result == optx.RESULTS.successful
-    solved = converged | (solution.result == optx.RESULTS.nonlinear_max_steps_reached)
     finite_out = jnp.all(jnp.array([jnp.all(jnp.isfinite(a)) for a in jax.tree.leaves(out)])) & jnp.isfinite(err)
     status = jnp.where(~enough, NO_KEYPOINTS, jnp.where(solved & finite_out, OK, FAILED)).astype(jnp.int32)
     keep = status == OK
@@ -170,11 +186,64 @@ def fit_frame(model: BodyModel, keypoints: Float[Array, "67 3"], init: SMPLXPara
     return fit_one(km, keypoints, pose, init.betas, camera, lens, config, adjoint=adjoint)
 
 
+def _frames(fn, *args, in_axes=0):
+    """``fn`` of one frame vmapped over the frames of ``args``, matrix products in full float32 (`fit_one`)."""
+    with jax.default_matmul_precision("highest"):
+        return jax.vmap(fn, in_axes=in_axes)(*args)
+
+
 @functools.partial(jax.jit, static_argnames=("config", "fixed_shape"))
-def _fit_batch(km, keypoints, pose, betas, camera, free, lens, config: FitConfig, fixed_shape: bool = False):
-    one = functools.partial(fit_one, config=config, fit_betas=jnp.zeros((), pose.dtype) if fixed_shape else None)
-    return jax.vmap(lambda k, p, b, c, f: one(km, k, p, b, c, lens, free=f),
-                    in_axes=(0, 0, 0, None if camera is None else 0, 0))(keypoints, pose, betas, camera, free)
+def _start_batch(km, keypoints, pose, betas, camera, free, lens, config: FitConfig, fixed_shape: bool = False):
+    """A batch's problems (``km`` left out: one for all), starts, start cameras and solver states."""
+    fit_betas = jnp.zeros((), pose.dtype) if fixed_shape else None
+
+    def one(k, p, b, c, f):
+        problem, start, c = _problem(km, k, p, b, c, lens, config, f, fit_betas)
+        return problem._replace(km=None), start, c, levenberg_marquardt.initial_state(problem, start, config)
+
+    return _frames(one, keypoints, pose, betas, camera, free, in_axes=(0, 0, 0, None if camera is None else 0, 0))
+
+
+@functools.partial(jax.jit, static_argnames="config")
+def _advance_batch(km, problem, y, state, steps, config: FitConfig):
+    return _frames(lambda p, *rest: levenberg_marquardt.advance(p._replace(km=km), *rest, config=config),
+                   problem, y, state, steps)
+
+
+@jax.jit
+def _result_batch(km, problem, start, camera, y, converged):
+    return _frames(lambda p, *rest: _result(p._replace(km=km), *rest, solved=True), problem, start, camera, y,
+                   converged)
+
+
+def _rows(tree) -> int:
+    return len(jax.tree.leaves(tree)[0])
+
+
+def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progress) -> FitResult:
+    """`fit` of a few frames ``(keypoints, pose, betas, camera, free)``, in rounds of `ROUND_STEPS` steps: each
+    round runs the frames still going in as few padded batches as hold them, so no batch waits on its slowest frame
+    (a fit's steps are the same in whatever batch it runs)."""
+    def batches(fn, tree, keep=np.array):
+        return jax.tree.map(keep, map_in_buckets(lambda chunk, n: fn(*shard_frames(chunk, _rows(chunk))), tree,
+                                                 BUCKETS))
+
+    problem, start, camera, state = batches(
+        lambda *chunk: _start_batch(km, *chunk, lens, config, fixed_shape), frames)
+    y, steps, done = start, np.zeros(len(frames[0]), np.int32), np.zeros(len(frames[0]), bool)
+    while (active := np.flatnonzero(~done)).size:
+        budget = np.minimum(ROUND_STEPS, config.iterations - steps[active]).astype(np.int32)
+        picked = jax.tree.map(lambda a: a[active], (problem, y, state))
+        moved = batches(lambda *chunk: _advance_batch(km, *chunk, config), (*picked, budget))
+        for whole, part in zip(jax.tree.leaves((y, state)), jax.tree.leaves(moved[:2])):
+            whole[active] = part
+        steps[active] += moved[2]
+        done[active] = (state.converged[active] | levenberg_marquardt.stalled(state)[active]
+                        | (steps[active] >= config.iterations))
+        if progress is not None:
+            progress(int(done[active].sum()))
+    return batches(lambda *chunk: _result_batch(km, *chunk), (problem, start, camera, y, state.converged),
+                   keep=jnp.asarray)
 
 
 def full_pose_of(params: SMPLXParams) -> Float[Array, "T 55 3"]:
@@ -203,8 +272,8 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
     default `default_pose` with mean shape; ``fixed_shape``: keep ``init.betas`` (fit pose and camera);
     ``free_joints`` (T, 55) bool: the joints each frame fits (the others keep ``init``'s; default all). Camera: given
     (both arrays), or fitted to the start; a pinhole of ``focal_length`` and ``principal_point`` or weak perspective
-    (`fit_frame`). ``progress(n)`` is called after each chunk with the number of frames done. Runs in the model's
-    precision (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64).
+    (`fit_frame`). ``progress(n)`` is called after each round with the number of frames it finished. Runs in the
+    model's precision (float32; a model loaded as float64 under ``jax.enable_x64`` fits in float64).
     """
     config = dataclasses.replace(config or FitConfig(), iterations=iterations)
     dtype = np.dtype(model.joint_template.dtype)
@@ -226,16 +295,10 @@ def fit(model: BodyModel, keypoints, init: SMPLXParams | None = None, camera_sca
     free = np.ones((t, 55), dtype) if free_joints is None else _check("free_joints", free_joints, (t, 55), dtype)
     km = openpose_keypoint_model(model)
     lens = lens_arrays(focal_length, principal_point, dtype)
-
-    def fit_chunk(frames, n):
-        kp, *rest = frames
-        kp = np.concatenate([kp[:n], np.zeros_like(kp[n:])])  # padding frames have no keypoints
-        out = jax.block_until_ready(_fit_batch(km, *shard_frames((kp, *rest), len(kp)), lens, config, fixed_shape))
-        if progress is not None:
-            progress(n)
-        return out
-
-    return map_in_buckets(fit_chunk, (keypoints, pose, betas, camera, free), BUCKETS)
+    frames = (keypoints, pose, betas, camera, free)
+    parts = [_solve_frames(km, jax.tree.map(lambda a: a[i:i + SOLVE_FRAMES], frames), lens, config, fixed_shape,
+                           progress) for i in range(0, t, SOLVE_FRAMES)]
+    return parts[0] if len(parts) == 1 else jax.tree.map(lambda *p: jnp.concatenate(p), *parts)
 
 
 __all__ = ["BUCKETS", "ITERATIONS", "FitConfig", "FitResult", "default_pose", "fit", "fit_frame",

@@ -15,7 +15,8 @@ aligned over a whole step, where axis-angle steps drift off that valley.
   taken the residuals' own curvature, which ``H`` leaves out (NL2SOL's structured secant, `updated_secant`; near
   the optimum the fingertips' curvature is several times the Gauss-Newton one, and Gauss-Newton steps crawl).
   Converges: the solve stops once a step at damping at most 1 predicts a relative decrease of the cost below
-  ``SolverConfig.tolerance``, and reports it.
+  ``SolverConfig.tolerance``, and reports it; it stops unconverged once refused steps have raised the damping
+  to its cap (`stalled`), where no later step could move it.
 * ``"cg"``: ``cg_iterations`` steps of conjugate gradients, matrix-free, preconditioned by the 3x3 block of each
   joint, the shape's diagonal and the camera's block (`Blocks`): several times faster per step, inexact, for a
   fixed number of steps (the pipeline's and live capture's fits; the same stopping test, rarely met).
@@ -37,7 +38,7 @@ import jax.numpy as jnp
 import lineax as lx
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Bool, Float, Int
 
 from jaxmocap.integrate import keypoints, mat3
 from jaxmocap.integrate.keypoints import KeypointModel, Linearization
@@ -359,10 +360,20 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):
-        return state.converged, optx.RESULTS.successful
+        stop = state.converged | stalled(state)  # optimistix goes on while the result is successful
+        return stop, optx.RESULTS.where(stop & ~state.converged, optx.RESULTS.nonlinear_max_steps_reached,
+                                        optx.RESULTS.successful)
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result):
         return y, aux, {}
+
+
+def stalled(state: _State) -> Bool[Array | np.ndarray, "*frames"]:
+    """Whether refused steps have raised the damping to `MAX_DAMPING`: no step, however short, lowered the cost (a
+    float32 fit at the limit of its precision short of the stopping rule: its steps are then some 1e-10 of a
+    gradient step, below the cost's resolution, and each is refused like the ones before). The solve stops there,
+    not converged, as at its step cap."""
+    return state.damping >= MAX_DAMPING
 
 
 def default_tolerance(dtype) -> float:
@@ -371,12 +382,37 @@ def default_tolerance(dtype) -> float:
     return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
 
 
+def _solver(config: SolverConfig, dtype) -> LevenbergMarquardt:
+    return LevenbergMarquardt(config, config.tolerance or default_tolerance(dtype))
+
+
 def solve(problem: Problem, y0: Unknowns, config: SolverConfig, adjoint: optx.AbstractAdjoint | None = None
           ) -> optx.Solution:
     """Minimise the cost of `residuals` from ``y0`` (`LevenbergMarquardt`, at most ``config.iterations`` steps;
     ``result`` successful when converged, ``nonlinear_max_steps_reached`` otherwise; no exception under
     `jax.vmap`). ``adjoint``: how gradients go through the solve (default `optimistix.ImplicitAdjoint`)."""
-    tolerance = config.tolerance or default_tolerance(y0.pose_rotvecs.dtype)
-    return optx.least_squares(jax.tree_util.Partial(residuals, config=config), LevenbergMarquardt(config, tolerance),
+    return optx.least_squares(jax.tree_util.Partial(residuals, config=config), _solver(config, y0.camera.dtype),
                               y0, problem, max_steps=config.iterations, throw=False,
                               adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
+
+
+def initial_state(problem: Problem, y0: Unknowns, config: SolverConfig) -> _State:
+    """The state `solve` starts from at ``y0`` (for `advance`)."""
+    return _solver(config, y0.camera.dtype).init(None, y0, problem, {}, None, None, frozenset())
+
+
+def advance(problem: Problem, y: Unknowns, state: _State, steps: Int[Array, ""], config: SolverConfig
+            ) -> tuple[Unknowns, _State, Int[Array, ""]]:
+    """`solve`'s steps (without its adjoint) in pieces: at most ``steps`` more from ``(y, state)``, fewer once
+    converged (``state.converged``) or `stalled`; returns the point, the state and the steps taken. Between pieces,
+    a batch can set aside its frames that are done (`fitting.fit`)."""
+    solver = _solver(config, y.camera.dtype)
+
+    def body(carry):
+        taken, y, state = carry
+        y, state, _ = solver.step(None, y, problem, {}, state, frozenset())
+        return taken + 1, y, state
+
+    taken, y, state = jax.lax.while_loop(lambda c: (c[0] < steps) & ~c[2].converged & ~stalled(c[2]), body,
+                                         (jnp.zeros((), steps.dtype), y, state))
+    return y, state, taken
