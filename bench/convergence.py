@@ -7,7 +7,10 @@ of the shipped clips as a run observes them (our detector's keypoints, the run's
 
 Real sets: every other frame of cam01 and cam03 of the single-person take and of each person of the two-person take
 (each clip run once, `run_bodies` with an observer, in a temporary folder). Synthetic: 64 frames of
-`jaxmocap.integrate.synthetic` (2 px noise, 15% of keypoints dropped, a perturbed start), weak perspective.
+`jaxmocap.integrate.synthetic` (2 px noise, 15% of keypoints dropped, a perturbed start), weak perspective, and
+`bench/fit.py`'s 1024 frames of the same kind ("synthetic 1024"). Each set is fitted once, at the largest N: a frame
+converged within N steps is one that converged in at most N (`FitResult.steps`). For that N, the frames that did
+not converge are counted as stalled (`levenberg_marquardt.stalled`: stopped short of the cap) or capped.
 ``--x64``: the same in float64 (the model loaded in float64). ``--quick``: the default cap alone
 (`fitting.ITERATIONS`).
 """
@@ -18,7 +21,6 @@ import argparse
 import json
 import platform
 import tempfile
-import time
 from pathlib import Path
 
 import jax
@@ -80,26 +82,34 @@ def main():
     dtype = np.float64 if args.x64 else np.float32
     model = smplx_jax.load_model(smplx_jax.default_model_path(), dtype=dtype)
     sets = observed_sets(smplx_jax.load_model(smplx_jax.default_model_path()) if args.x64 else model)
-    problem = synthetic.make_problem(model, 64, seed=1)
+    cap = max(args.steps)
+    results = {}
+    for name, data in sets.items():
+        init = params_from_full_pose(data["pose"].astype(dtype), data["betas"].astype(dtype), model.num_expression)
+        focal, center = data["lens"]
+        results[name] = fit(model, data["keypoints"].astype(dtype), init, focal_length=focal,
+                            principal_point=np.asarray(center, dtype), iterations=cap)
+    for name, frames, seed in (("synthetic", 64, 1), ("synthetic 1024", 1024, 1024)):
+        problem = synthetic.make_problem(model, frames, seed=seed)
+        results[name] = fit(model, problem.keypoints, problem.init, iterations=cap)
     rows = []
     for steps in args.steps:
         row = {"steps": steps}
-        for name, data in sets.items():
-            init = params_from_full_pose(data["pose"].astype(dtype), data["betas"].astype(dtype), model.num_expression)
-            focal, center = data["lens"]
-            begin = time.perf_counter()
-            result = fit(model, data["keypoints"].astype(dtype), init, focal_length=focal,
-                         principal_point=np.asarray(center, dtype), iterations=steps)
-            row[name] = dict(frames=len(data["keypoints"]), converged=float(np.mean(result.converged)),
-                             median_px=float(np.median(result.reprojection_error_px)),
-                             seconds=time.perf_counter() - begin)
-        result = fit(model, problem.keypoints, problem.init, iterations=steps)
-        row["synthetic"] = dict(frames=64, converged=float(np.mean(result.converged)),
-                                median_px=float(np.median(result.reprojection_error_px)))
+        for name, result in results.items():
+            converged = np.asarray(result.converged) & (np.asarray(result.steps) <= steps)
+            row[name] = dict(frames=len(converged), converged=float(np.mean(converged)),
+                             median_px=float(np.median(result.reprojection_error_px)))
         rows.append(row)
-        print(row, flush=True)
+    ends = {}
+    for name, result in results.items():
+        left = ~np.asarray(result.converged)
+        stalled = left & (np.asarray(result.steps) < cap)
+        ends[name] = dict(stalled=np.flatnonzero(stalled).tolist(), capped=np.flatnonzero(left & ~stalled).tolist(),
+                          steps_median=float(np.median(result.steps)), steps_p99=float(np.percentile(result.steps, 99)))
+        print(f"{name}: steps median {ends[name]['steps_median']:.0f}, 99th percentile {ends[name]['steps_p99']:.0f}; "
+              f"at {cap}, stalled {ends[name]['stalled']}, capped {ends[name]['capped']}", flush=True)
 
-    names = list(sets) + ["synthetic"]
+    names = list(results)
     print(f"\nshare converged at the defaults (median px), {np.dtype(dtype).name}, jax {jax.__version__}, "
           f"{platform.machine()}")
     print(f"{'steps':>6} " + " ".join(f"{n:>18}" for n in names))
@@ -109,7 +119,7 @@ def main():
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"convergence{'_x64' if args.x64 else ''}.json"
     path.write_text(json.dumps(dict(benchmark="convergence", dtype=np.dtype(dtype).name, jax=jax.__version__,
-                                    machine=platform.machine(), rows=rows), indent=2))
+                                    machine=platform.machine(), rows=rows, cap=cap, ends=ends), indent=2))
     print(f"wrote {path}")
 
 

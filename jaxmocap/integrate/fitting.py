@@ -36,8 +36,8 @@ from smplx_jax import BodyModel, SMPLXParams, constants
 
 BUCKETS = (1, 8, 32, 64)  # padded batch sizes; longer inputs run in chunks of 64 (faster here than 1024: cache)
 MIN_KEYPOINTS = 3  # fewer visible keypoints: the frame has no person to fit
-ITERATIONS = 400  # the default cap on steps: every frame of the shipped clips and bench/convergence.py's synthetic
-# set converges within it, float32 and float64 (98-99% of bench/fit.py's harder set; docs/BENCHMARKS.md)
+ITERATIONS = 400  # the default cap on steps: every frame of the shipped clips converges within it, float32 and
+# float64; of bench/convergence.py's synthetic sets 99.6-100% in float64, 98% in float32 (docs/BENCHMARKS.md)
 ROUND_STEPS = 50  # `fit` steps its frames in rounds of at most this many (`_solve_frames`)
 SOLVE_FRAMES = 1024  # `fit` solves at most this many frames at a time (their solver states are held in memory)
 
@@ -53,7 +53,8 @@ class FitResult(NamedTuple):
     (``iterations``); implicit gradients are exact where it did.
     ``camera_scale``, ``camera_trans``: the weak-perspective projection of the fitted body (``transl`` included;
     docs/formats.md, "Coordinates and cameras"), for a pinhole camera the one closest to its projection.
-    ``reprojection_error_px``: the fit's own (perspective for a pinhole camera)."""
+    ``reprojection_error_px``: the fit's own (perspective for a pinhole camera). ``steps``: the solver's steps taken
+    (at most ``iterations``; fewer where it converged, or `levenberg_marquardt.stalled`)."""
 
     params: SMPLXParams
     camera_scale: Float[Array, "*T"]
@@ -62,6 +63,7 @@ class FitResult(NamedTuple):
     reprojection_error_px: Float[Array, "*T"]  # mean pixel distance over keypoints with confidence > 0 (0 if none)
     initial_reprojection_error_px: Float[Array, "*T"]
     converged: Bool[Array, "*T"]
+    steps: Int[Array, "*T"]
 
     @property
     def valid(self):
@@ -100,7 +102,7 @@ def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, 
     solution = levenberg_marquardt.solve(problem, start, config, adjoint)
     converged = solution.result == optx.RESULTS.successful
     solved = converged | (solution.result == optx.RESULTS.nonlinear_max_steps_reached)
-    return _result(problem, start, camera, solution.value, converged, solved)
+    return _result(problem, start, camera, solution.value, converged, solved, solution.stats["num_steps"])
 
 
 def _problem(km, keypoints, pose, betas, camera, lens, config, free, fit_betas
@@ -122,7 +124,7 @@ def _problem(km, keypoints, pose, betas, camera, lens, config, free, fit_betas
 
 
 def _result(problem: least_squares.Problem, start: least_squares.Unknowns, camera, out: least_squares.Unknowns,
-            converged, solved) -> FitResult:
+            converged, solved, steps) -> FitResult:
     """The `FitResult` of a solve of ``problem`` from ``start`` (camera ``(scale, tx, ty)``) that ended at ``out``."""
     km, target, conf, pose, betas = problem.km, problem.target, problem.conf, problem.pose0, problem.betas0
     inv_focal, center = problem.inv_focal, problem.center
@@ -151,7 +153,7 @@ def _result(problem: least_squares.Problem, start: least_squares.Unknowns, camer
     params = params_of(pick(out.pose_rotvecs, pose), pick(out.betas, betas), km.body.num_expression)
     params = params.replace(transl=pick(transl, jnp.zeros_like(transl)))
     return FitResult(params, pick(scale, camera[0]), pick(trans, camera[1:]), status, pick(err, err0), err0,
-                     keep & converged)
+                     keep & converged, jnp.asarray(steps, jnp.int32))
 
 
 def lens_arrays(focal_length, principal_point, dtype):
@@ -211,9 +213,9 @@ def _advance_batch(km, problem, y, state, steps, config: FitConfig):
 
 
 @jax.jit
-def _result_batch(km, problem, start, camera, y, converged):
-    return _frames(lambda p, *rest: _result(p._replace(km=km), *rest, solved=True), problem, start, camera, y,
-                   converged)
+def _result_batch(km, problem, start, camera, y, converged, steps):
+    return _frames(lambda p, s, c, y, ok, n: _result(p._replace(km=km), s, c, y, ok, True, n), problem, start,
+                   camera, y, converged, steps)
 
 
 def _rows(tree) -> int:
@@ -221,9 +223,9 @@ def _rows(tree) -> int:
 
 
 def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progress) -> FitResult:
-    """`fit` of a few frames ``(keypoints, pose, betas, camera, free)``, in rounds of `ROUND_STEPS` steps: each
-    round runs the frames still going in as few padded batches as hold them, so no batch waits on its slowest frame
-    (a fit's steps are the same in whatever batch it runs)."""
+    """`fit` of at most `SOLVE_FRAMES` frames ``(keypoints, pose, betas, camera, free)``, in rounds of `ROUND_STEPS`
+    steps: each round runs the frames still going in as few padded batches as hold them, so no batch waits on its
+    slowest frame (a frame takes the steps it would alone, up to float32's rounding in batches of other sizes)."""
     def batches(fn, tree, keep=np.array):
         return jax.tree.map(keep, map_in_buckets(lambda chunk, n: fn(*shard_frames(chunk, _rows(chunk))), tree,
                                                  BUCKETS))
@@ -242,7 +244,7 @@ def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progre
                         | (steps[active] >= config.iterations))
         if progress is not None:
             progress(int(done[active].sum()))
-    return batches(lambda *chunk: _result_batch(km, *chunk), (problem, start, camera, y, state.converged),
+    return batches(lambda *chunk: _result_batch(km, *chunk), (problem, start, camera, y, state.converged, steps),
                    keep=jnp.asarray)
 
 
