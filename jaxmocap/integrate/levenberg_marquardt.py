@@ -16,7 +16,7 @@ aligned over a whole step, where axis-angle steps drift off that valley.
   the optimum the fingertips' curvature is several times the Gauss-Newton one, and Gauss-Newton steps crawl).
   Converges: the solve stops once a step at damping at most 1 predicts a relative decrease of the cost below
   ``SolverConfig.tolerance``, and reports it; it stops unconverged once refused steps have raised the damping
-  to its cap (`stalled`), where no later step could move it.
+  to its cap (`stalled`: in float32, no later step lowers the cost).
 * ``"cg"``: ``cg_iterations`` steps of conjugate gradients, matrix-free, preconditioned by the 3x3 block of each
   joint, the shape's diagonal and the camera's block (`Blocks`): several times faster per step, inexact, for a
   fixed number of steps (the pipeline's and live capture's fits; the same stopping test, rarely met).
