@@ -192,6 +192,8 @@ def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit, monkeypatch)
     same = np.abs(np.asarray(r.params.body_pose) - np.asarray(noisy_fit.params.body_pose[:T - 5])).max((1, 2)) < 1e-6
     gap = np.abs(np.asarray(r.reprojection_error_px) - np.asarray(noisy_fit.reprojection_error_px[:T - 5]))
     assert same.sum() >= (T - 5) // 2 and np.asarray(r.converged).all() and gap.max() < 0.03, (same, gap)
+    # the start's error is the start's, whatever batches the fit ran on in
+    np.testing.assert_array_equal(r.initial_reprojection_error_px, noisy_fit.initial_reprojection_error_px[:T - 5])
 
 
 def test_vmapped_fit_equals_the_fit_of_each_frame_alone(default_model_dir, noisy):

@@ -232,7 +232,8 @@ def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progre
 
     problem, start, camera, state = batches(
         lambda *chunk: _start_batch(km, *chunk, lens, config, fixed_shape), frames)
-    y, steps, done = start, np.zeros(len(frames[0]), np.int32), np.zeros(len(frames[0]), bool)
+    y = jax.tree.map(np.copy, start)  # (its rows are overwritten round by round; the start's error reads start)
+    steps, done = np.zeros(len(frames[0]), np.int32), np.zeros(len(frames[0]), bool)
     while (active := np.flatnonzero(~done)).size:
         budget = np.minimum(ROUND_STEPS, config.iterations - steps[active]).astype(np.int32)
         picked = jax.tree.map(lambda a: a[active], (problem, y, state))
@@ -240,8 +241,7 @@ def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progre
         for whole, part in zip(jax.tree.leaves((y, state)), jax.tree.leaves(moved[:2])):
             whole[active] = part
         steps[active] += moved[2]
-        done[active] = (state.converged[active] | levenberg_marquardt.stalled(state)[active]
-                        | (steps[active] >= config.iterations))
+        done[active] = levenberg_marquardt.finished(state)[active] | (steps[active] >= config.iterations)
         if progress is not None:
             progress(int(done[active].sum()))
     return batches(lambda *chunk: _result_batch(km, *chunk), (problem, start, camera, y, state.converged, steps),

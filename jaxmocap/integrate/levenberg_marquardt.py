@@ -360,7 +360,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):
-        stop = state.converged | stalled(state)  # optimistix goes on while the result is successful
+        stop = finished(state)  # optimistix goes on while the result is successful
         return stop, optx.RESULTS.where(stop & ~state.converged, optx.RESULTS.nonlinear_max_steps_reached,
                                         optx.RESULTS.successful)
 
@@ -374,6 +374,11 @@ def stalled(state: _State) -> Bool[Array | np.ndarray, "*frames"]:
     gradient step, below the cost's resolution, and each is refused like the ones before). The solve stops there,
     not converged, as at its step cap."""
     return state.damping >= MAX_DAMPING
+
+
+def finished(state: _State) -> Bool[Array | np.ndarray, "*frames"]:
+    """Whether the solve stops here, short of its step cap: converged or `stalled`."""
+    return state.converged | stalled(state)
 
 
 def default_tolerance(dtype) -> float:
@@ -404,8 +409,8 @@ def initial_state(problem: Problem, y0: Unknowns, config: SolverConfig) -> _Stat
 def advance(problem: Problem, y: Unknowns, state: _State, steps: Int[Array, ""], config: SolverConfig
             ) -> tuple[Unknowns, _State, Int[Array, ""]]:
     """`solve`'s steps (without its adjoint) in pieces: at most ``steps`` more from ``(y, state)``, fewer once
-    converged (``state.converged``) or `stalled`; returns the point, the state and the steps taken. Between pieces,
-    a batch can set aside its frames that are done (`fitting.fit`)."""
+    `finished`; returns the point, the state and the steps taken. Between pieces, a batch can set aside its frames
+    that are done (`fitting.fit`)."""
     solver = _solver(config, y.camera.dtype)
 
     def body(carry):
@@ -413,6 +418,6 @@ def advance(problem: Problem, y: Unknowns, state: _State, steps: Int[Array, ""],
         y, state, _ = solver.step(None, y, problem, {}, state, frozenset())
         return taken + 1, y, state
 
-    taken, y, state = jax.lax.while_loop(lambda c: (c[0] < steps) & ~c[2].converged & ~stalled(c[2]), body,
+    taken, y, state = jax.lax.while_loop(lambda c: (c[0] < steps) & ~finished(c[2]), body,
                                          (jnp.zeros((), steps.dtype), y, state))
     return y, state, taken
