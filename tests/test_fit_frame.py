@@ -139,9 +139,11 @@ def test_jit_equals_eager(x64, default_model_dir):
     assert float(eager.reprojection_error_px) < 0.5 * float(eager.initial_reprojection_error_px)
 
 
-def test_a_solve_stalled_at_its_damping_cap_stops_unconverged(x64, default_model_dir):
-    """Once refused steps have raised the damping to its cap, the solve stops (in float32 the later steps would
-    all be refused in place, holding up the batch: `levenberg_marquardt.stalled`), reported not converged."""
+def test_a_solve_stalled_at_its_damping_cap_restarts_once_then_stops_unconverged(x64, default_model_dir):
+    """Refused steps that raise the damping to its cap start the solve again at damping 1 without the secant ``S``
+    (the refusals that shrank ``S`` ran the damping past every step that lowers the cost); the second time it stops
+    (in float32 the later steps would all be refused in place, holding up the batch: `levenberg_marquardt.stalled`),
+    reported not converged."""
     model = load64(default_model_dir)
     km = fitting.openpose_keypoint_model(model)
     kp, init = synthetic64(model, seed=3)
@@ -151,6 +153,17 @@ def test_a_solve_stalled_at_its_damping_cap_stops_unconverged(x64, default_model
     solver = levenberg_marquardt.LevenbergMarquardt(config, levenberg_marquardt.default_tolerance(jnp.float64))
     state = levenberg_marquardt.initial_state(problem, start, config)
     assert not bool(solver.terminate(None, start, problem, {}, state, frozenset())[0])
-    stalled = eqx.tree_at(lambda s: s.damping, state, jnp.asarray(levenberg_marquardt.MAX_DAMPING, jnp.float64))
-    stop, result = solver.terminate(None, start, problem, {}, stalled, frozenset())
+    step = jax.jit(lambda y, state: solver.step(None, y, problem, {}, state, frozenset())[:2])
+    # a state no step can improve on (its cost 0), one refusal short of the cap, with a secant
+    near_cap = eqx.tree_at(lambda s: (s.cost, s.damping, s.secant), state,
+                           (jnp.zeros((), jnp.float64), jnp.asarray(levenberg_marquardt.MAX_DAMPING / 1.5),
+                            jnp.eye(state.secant.shape[0])))
+    y, restarted = step(start, near_cap)
+    assert float(restarted.damping) == 1.0 and float(restarted.growth) == 2.0 and bool(restarted.restarted)
+    assert not np.asarray(restarted.secant).any() and not bool(levenberg_marquardt.stalled(restarted))
+    assert not bool(solver.terminate(None, y, problem, {}, restarted, frozenset())[0])
+    _, stalled = step(y, eqx.tree_at(lambda s: (s.damping, s.growth), restarted,
+                                     (near_cap.damping, near_cap.growth)))
+    assert float(stalled.damping) == levenberg_marquardt.MAX_DAMPING and bool(levenberg_marquardt.stalled(stalled))
+    stop, result = solver.terminate(None, y, problem, {}, stalled, frozenset())
     assert bool(stop) and result == optx.RESULTS.nonlinear_max_steps_reached

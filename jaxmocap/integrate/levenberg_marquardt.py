@@ -15,8 +15,8 @@ aligned over a whole step, where axis-angle steps drift off that valley.
   taken the residuals' own curvature, which ``H`` leaves out (NL2SOL's structured secant, `updated_secant`; near
   the optimum the fingertips' curvature is several times the Gauss-Newton one, and Gauss-Newton steps crawl).
   Converges: the solve stops once a step at damping at most 1 predicts a relative decrease of the cost below
-  ``SolverConfig.tolerance``, and reports it; it stops unconverged once refused steps have raised the damping
-  to its cap (`stalled`: in float32, no later step lowers the cost).
+  ``SolverConfig.tolerance``, and reports it. Refused steps that raise the damping to its cap start it again
+  once at damping 1 without ``S``; a second time it stops unconverged (`stalled`: no later step lowers the cost).
 * ``"cg"``: ``cg_iterations`` steps of conjugate gradients, matrix-free, preconditioned by the 3x3 block of each
   joint, the shape's diagonal and the camera's block (`Blocks`): several times faster per step, inexact, for a
   fixed number of steps (the pipeline's and live capture's fits; the same stopping test, rarely met).
@@ -305,6 +305,7 @@ class _State(eqx.Module):
     last_gradient: Float[Array, "n"]  # the gradient where it started
     stepped: Bool[Array, ""]  # whether the last step was taken (the pair then updates S)
     stiff: Bool[Array, "L"]  # bending limits a refused step crossed, while within BEND_MARGIN inside and pressed
+    restarted: Bool[Array, ""]  # whether it has stalled once and started again (`stalled`)
 
 
 class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
@@ -324,7 +325,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         n = _flat(y, self.config).shape[0] if self.config.linear_solver == "cholesky" else 0
         zero = jnp.zeros(n, cost.dtype)
         return _State(cost, self.config.initial_damping * one, 2.0 * one, jnp.array(False),
-                      jnp.zeros((n, n), cost.dtype), zero, zero, jnp.array(False), jnp.zeros(len(BEND_LIMITS), bool))
+                      jnp.zeros((n, n), cost.dtype), zero, zero, jnp.array(False), jnp.zeros(len(BEND_LIMITS), bool), jnp.array(False))
 
     def step(self, fn, y, args, options, state, tags):
         model = local_model(y, args, self.config, state.stiff)
@@ -354,9 +355,11 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
                               state.stiff | ((before <= 0) & (after > 0)))
         else:  # the pipeline's few CG steps hold no limit's stiffness (no better on the real views with it)
             last_step, last_gradient, stiff = state.last_step, state.last_gradient, state.stiff
-        new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING),
-                     jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged,
-                     secant, last_step, last_gradient, accept, stiff)
+        restart = (damping >= MAX_DAMPING) & ~state.restarted
+        new = _State(jnp.where(accept, cost, state.cost), jnp.where(restart, 1.0, jnp.minimum(damping, MAX_DAMPING)),
+                     jnp.where(accept | restart, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged,
+                     jnp.where(restart, 0.0, secant), last_step, last_gradient, accept, stiff,
+                     state.restarted | restart)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):
@@ -369,10 +372,12 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
 
 
 def stalled(state: _State) -> Bool[Array | np.ndarray, "*frames"]:
-    """Whether refused steps have raised the damping to `MAX_DAMPING`: no step, however short, lowered the cost (a
-    float32 fit at the limit of its precision short of the stopping rule: its steps are then some 1e-10 of a
-    gradient step, below the cost's resolution, and each is refused like the ones before). The solve stops there,
-    not converged, as at its step cap."""
+    """Whether refused steps have raised the damping to `MAX_DAMPING` a second time. The first time, the solve
+    starts again at damping 1 without ``S``: each refused step halves ``S`` but multiplies the damping by a growing
+    factor, so by the time ``S`` no longer misleads, the damping has run past every step that would lower the cost
+    (20 of bench/fit.py's 1024 float32 frames stopped there, all 20 converge after it; docs/BENCHMARKS.md). The
+    second time, no step however short lowers the cost (its steps are some 1e-10 of a gradient step, below the
+    cost's resolution in float32), and the solve stops, not converged, as at its step cap."""
     return state.damping >= MAX_DAMPING
 
 
