@@ -324,8 +324,9 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         one = jnp.ones((), cost.dtype)
         n = _flat(y, self.config).shape[0] if self.config.linear_solver == "cholesky" else 0
         zero = jnp.zeros(n, cost.dtype)
-        return _State(cost, self.config.initial_damping * one, 2.0 * one, jnp.array(False),
-                      jnp.zeros((n, n), cost.dtype), zero, zero, jnp.array(False), jnp.zeros(len(BEND_LIMITS), bool), jnp.array(False))
+        no = jnp.array(False)
+        return _State(cost, self.config.initial_damping * one, 2.0 * one, no, jnp.zeros((n, n), cost.dtype), zero,
+                      zero, no, jnp.zeros(len(BEND_LIMITS), bool), no)
 
     def step(self, fn, y, args, options, state, tags):
         model = local_model(y, args, self.config, state.stiff)
