@@ -8,6 +8,7 @@ linear blend skinning; then vertex joints and face landmarks, and ``transl`` las
 import functools
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -102,6 +103,7 @@ def _pose_feature(rel_rotmats):
     return (rel_rotmats[1:] - jnp.eye(3, dtype=rel_rotmats.dtype)).reshape(-1)
 
 
+@jax.jit  # traced once per shape, then reused at every call site (their traces are most of a run's first second)
 def _posed_skeleton(model: BodyModel, params: SMPLXParams):
     shape = params.shape_components()
     rel_rotmats = rotvec_to_rotmat(params.full_pose())

@@ -179,6 +179,7 @@ def _pose_blend(km: KeypointModel, feature: Float[Array, "3 3 55"]) -> Float[Arr
     return (feature[:, :, 1:].reshape(-1) @ km.posedirs).reshape(3, NUM_VERTEX_JOINTS)
 
 
+@jax.jit  # traced once, reused by each of the fit's many call sites
 def _pose(km: KeypointModel, pose_rotvecs, betas) -> _Posed:
     """The skinning of `smplx_jax.forward_joints`, for the skeleton and the vertex joints only."""
     body = km.body
