@@ -103,7 +103,7 @@ def _pose_feature(rel_rotmats):
     return (rel_rotmats[1:] - jnp.eye(3, dtype=rel_rotmats.dtype)).reshape(-1)
 
 
-@jax.jit  # traced once per shape, then reused at every call site (their traces are most of a run's first second)
+@jax.jit  # traced once per shape and reused at every call site (retracing it was most of a run's tracing)
 def _posed_skeleton(model: BodyModel, params: SMPLXParams):
     shape = params.shape_components()
     rel_rotmats = rotvec_to_rotmat(params.full_pose())

@@ -15,8 +15,8 @@ aligned over a whole step, where axis-angle steps drift off that valley.
   taken the residuals' own curvature, which ``H`` leaves out (NL2SOL's structured secant, `updated_secant`; near
   the optimum the fingertips' curvature is several times the Gauss-Newton one, and Gauss-Newton steps crawl).
   Converges: the solve stops once a step at damping at most 1 predicts a relative decrease of the cost below
-  ``SolverConfig.tolerance``, and reports it. Refused steps that raise the damping to its cap start it again
-  once at damping 1 without ``S``; a second time it stops unconverged (`stalled`: no later step lowers the cost).
+  ``SolverConfig.tolerance``, and reports it. Once refused steps raise the damping to its cap, the solve starts
+  again at damping 1 without ``S``; the second time, it stops unconverged (`stalled`).
 * ``"cg"``: ``cg_iterations`` steps of conjugate gradients, matrix-free, preconditioned by the 3x3 block of each
   joint, the shape's diagonal and the camera's block (`Blocks`): several times faster per step, inexact, for a
   fixed number of steps (the pipeline's and live capture's fits; the same stopping test, rarely met).
