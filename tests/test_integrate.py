@@ -18,7 +18,17 @@ from conftest import load
 from jaxmocap.batching import bucket_size
 from jaxmocap.cli import main
 from jaxmocap.detect.openpose import json_name, write_openpose_json
-from jaxmocap.integrate import copy_paste, fit, fit_frame, fitting, ik, smooth_params, smooth_rotvecs, synthetic
+from jaxmocap.integrate import (
+    copy_paste,
+    fit,
+    fit_frame,
+    fitting,
+    ik,
+    inverse_kinematics,
+    smooth_params,
+    smooth_rotvecs,
+    synthetic,
+)
 from jaxmocap.motion import motion_params, read_motion
 from jaxmocap.pipeline.fit_folder import infer_image_size
 from params_util import random_params
@@ -259,6 +269,11 @@ def test_ik_recovers_joint_rotations_from_3d_joints(model):
     assert np.median(err) < 0.6 * np.median(err0), (np.median(err), np.median(err0))
     assert np.median(err[:, 0]) < 0.02  # the root is fully determined by the hips and spine
     np.testing.assert_allclose(np.asarray(cam)[:, 0], 1.0, atol=0.01)
+    # 13 frames pad to the bucket 16 frames padded to (32): the solver compiled for 16 serves, with the same rows
+    compiled = inverse_kinematics._ik_batch._cache_size()
+    again, *_ = ik(model, index, joints[:13], np.ones((13, len(index))), start[:13], betas[:13], free)
+    assert inverse_kinematics._ik_batch._cache_size() == compiled
+    np.testing.assert_array_equal(np.asarray(again), np.asarray(fitted)[:13])
 
 
 # ---- smoothing ----------------------------------------------------------------------------------------------

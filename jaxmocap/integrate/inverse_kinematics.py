@@ -18,8 +18,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxmocap.batching import map_in_buckets
 from jaxmocap.integrate import least_squares, levenberg_marquardt
-from jaxmocap.integrate.fitting import default_pose
+from jaxmocap.integrate.fitting import BUCKETS, default_pose
 from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
 from smplx_jax import BodyModel, constants
 
@@ -91,11 +92,12 @@ def ik(model: BodyModel, index, targets, conf, theta, betas, free_joints, *, fit
        config: least_squares.SolverConfig | None = None):
     """Fit ``theta (T, 55, 3)`` (joints ``free_joints`` free) and optionally ``betas`` so that the model's joints
     ``index`` (into the 127) match ``targets (T, K, 3)`` up to a scale and an offset. Returns
-    ``(theta, betas, cam (T, 4) = scale, offset, ok (T,))``; non-finite targets count as missing."""
+    ``(theta, betas, cam (T, 4) = scale, offset, ok (T,))``; non-finite targets count as missing. Solved in the
+    fit's padded batch sizes (`fitting.BUCKETS`): any number of frames reuses a few compiled solvers."""
     km = keypoint_model(model, index)
-    return _ik_batch(km, jnp.asarray(targets, jnp.float32), jnp.asarray(conf, jnp.float32),
-                     jnp.asarray(theta, jnp.float32), jnp.asarray(betas, jnp.float32),
-                     jnp.asarray(free_joints, jnp.float32), jnp.float32(fit_betas), config or IKConfig())
+    free, fit_shape, config = jnp.asarray(free_joints, jnp.float32), jnp.float32(fit_betas), config or IKConfig()
+    frames = tuple(jnp.asarray(a, jnp.float32) for a in (targets, conf, theta, betas))
+    return map_in_buckets(lambda chunk, _: _ik_batch(km, *chunk, free, fit_shape, config), frames, BUCKETS)
 
 
 def body_from_blazepose(model: BodyModel, world: np.ndarray, theta=None, betas=None, config=None):
