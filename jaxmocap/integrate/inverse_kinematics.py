@@ -61,16 +61,19 @@ IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, linear_s
                              prior_finger_range=0.2, robust_scale=0.2)
 
 
-def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config):
+def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config, prior_pose=None):
     """`ik` of one frame with its keypoint model ``km`` made beforehand; ``free_joints`` (55,) and ``fit_betas``
-    as float arrays (traced: one compiled solver serves any free set)."""
+    as float arrays (traced: one compiled solver serves any free set). The solve starts at ``theta``; the priors
+    hold the free joints near ``prior_pose`` (55, 3) (default ``theta``): a solve warm-started from the previous
+    frame keeps its priors on a fixed pose, so twists no joint position sees cannot drift from frame to frame."""
     finite = jnp.all(jnp.isfinite(targets), -1)
     conf = jnp.where(finite & (conf > 0), conf, 0.0)
     targets = jnp.where(finite[:, None], targets, 0.0)
     w = conf / jnp.maximum(jnp.sum(conf), 1e-12)
     offset = jnp.sum(w[:, None] * (targets - keypoints_cm(km, theta, betas).T), 0)
     prior = jnp.asarray(least_squares.prior_weights(config), theta.dtype)
-    problem = least_squares.Problem(km, targets, conf, theta, betas, prior, jnp.ones((), theta.dtype), free_joints,
+    centre = theta if prior_pose is None else jnp.where(free_joints[:, None] > 0, prior_pose, theta)
+    problem = least_squares.Problem(km, targets, conf, centre, betas, prior, jnp.ones((), theta.dtype), free_joints,
                                     fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
     start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))
     out = levenberg_marquardt.solve(problem, start, config).value

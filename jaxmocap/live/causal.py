@@ -1,6 +1,7 @@
-"""The live path's solve of each person in each frame, causal: IK warm-started from the person's previous frame,
-a few iterations of the fit to the 2D keypoints, then the One-Euro filter; one compiled call per person and
-frame (`step`)."""
+"""The live path's solve of each person in each frame, causal: IK warm-started from the person's previous frame
+(its priors on the rest pose, as offline: a warm start is where the solve begins, not where it is held), a few
+iterations of the fit to the 2D keypoints, then the One-Euro filter; one compiled call per person and frame
+(`step`)."""
 
 import dataclasses
 import functools
@@ -105,10 +106,13 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
     world, hands_world, hands_conf, keypoints = obs
     ik_config = IKConfig(iterations=settings.ik_iterations)
     targets, conf = blazepose_targets(world)
-    theta, betas, _, _ = ik_one(models.body, targets, conf, state.theta, state.betas, _MASKS[0], 0.0, ik_config)
+    rest = default_pose()  # the priors' centre, as in the offline IK (`body_from_blazepose`, `hand_into_body`)
+    theta, betas, _, _ = ik_one(models.body, targets, conf, state.theta, state.betas, _MASKS[0], 0.0, ik_config,
+                                rest)
     for side, km in enumerate((models.left, models.right) if settings.hands else ()):
         seen = jnp.full(21, jnp.where(hands_conf[side] > 0, 1.0, 0.0))
-        theta, betas, _, _ = ik_one(km, hands_world[side], seen, theta, betas, _MASKS[1 + side], 0.0, ik_config)
+        theta, betas, _, _ = ik_one(km, hands_world[side], seen, theta, betas, _MASKS[1 + side], 0.0, ik_config,
+                                    rest)
     fit_config = dataclasses.replace(FIT_FROM_IK, iterations=settings.fit_iterations)
     settled = state.shape_seconds >= settings.shape_settle
     fitted = fit_one(models.openpose, keypoints, theta, jnp.where(settled, state.shape, betas), None, lens,
