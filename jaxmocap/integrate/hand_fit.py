@@ -99,15 +99,13 @@ def hand_ik_one(km: KeypointModel, side, world, world_conf, ik_config=HAND_IK, s
     """The pose (55, 3; the body at rest) whose ``side`` hand (``"left"``, ``"right"``, or a boolean array, true
     for left) best matches ``world (21, 3)``, metric landmarks in image-aligned axes (x right, y down) with
     confidence ``world_conf (21,)``, up to a scale and an offset: IK of wrist and fingers from ``start`` (default
-    `palm_start`), its priors centred on `palm_start` (so a start carried from frame to frame cannot drift);
-    ``km`` is that side's `hand_keypoint_model`."""
+    `palm_start`); ``km`` is that side's `hand_keypoint_model`."""
     dtype = km.body.joint_template.dtype
-    closed_form = palm_start(km, side, world)
-    start = closed_form if start is None else start
+    start = palm_start(km, side, world) if start is None else start
     finite = jnp.all(jnp.isfinite(world), -1)
     world = jnp.where(finite[:, None], world, 0.0)
     pose, _, _, _ = ik_one(km, world, jnp.where(finite, world_conf, 0.0), start, jnp.zeros(km.body.num_betas, dtype),
-                           side_indices(side, dtype).free, jnp.zeros((), dtype), ik_config, closed_form)
+                           side_indices(side, dtype).free, jnp.zeros((), dtype), ik_config)
     return pose
 
 
