@@ -252,8 +252,9 @@ def full_pose_of(params: SMPLXParams) -> Float[Array, "T 55 3"]:
     return jax.vmap(SMPLXParams.full_pose)(params)
 
 
+@functools.partial(jax.jit, static_argnames="num_expression")
 def params_from_full_pose(pose, betas, num_expression: int) -> SMPLXParams:
-    return jax.vmap(lambda p, b: params_of(p, b, num_expression))(pose, betas)
+    return jax.vmap(params_of, in_axes=(0, 0, None))(pose, betas, num_expression)
 
 
 def _check(name, value, shape, dtype):

@@ -11,15 +11,18 @@ thigh turned one way about itself and the shin back) moves no keypoint, so the i
 """
 
 import dataclasses
+import functools
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
-from jaxmocap.integrate import FitConfig, fit
+from jaxmocap.integrate import FitConfig, FitResult
+from jaxmocap.integrate.fitting import fit_one, lens_arrays, openpose_keypoint_model
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.pipeline.records import Bodies
-from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
+from smplx_jax.rotations import rotmat_to_rotvec
 
 TURN_DEG = 45.0  # a body joint turning more than this from one frame to the next
 WRISTS = (20, 21)  # SMPL-X joints
@@ -29,9 +32,21 @@ BONES = ((1, 4), (2, 5), (3, 6), (4, 7), (5, 8), (6, 9), (7, 10), (8, 11), (12, 
          (17, 19), (18, 20), (19, 21))
 
 
+def rodrigues(rotvecs: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)``: the rotations of axis-angles ``(..., 3)``, in float64 (NumPy: called once per frame across
+    a turn, where an eager JAX call would cost milliseconds)."""
+    rotvecs = np.asarray(rotvecs, np.float64)
+    angle = np.linalg.norm(rotvecs, axis=-1, keepdims=True)
+    x, y, z = np.moveaxis(np.divide(rotvecs, angle, out=np.zeros_like(rotvecs), where=angle > 0), -1, 0)
+    zero = np.zeros_like(x)
+    k = np.stack([np.stack([zero, -z, y], -1), np.stack([z, zero, -x], -1), np.stack([-y, x, zero], -1)], -2)
+    angle = angle[..., None]
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * k @ k
+
+
 def body_rotmats(global_orient: np.ndarray, body_pose: np.ndarray) -> np.ndarray:
     """``(T, 22, 3, 3)``: the global orientation ``(T, 3)`` and the 21 body joints' rotations ``(T, 21, 3)``."""
-    return np.array(rotvec_to_rotmat(np.concatenate([np.asarray(global_orient)[:, None], np.asarray(body_pose)], 1)))
+    return rodrigues(np.concatenate([np.asarray(global_orient)[:, None], np.asarray(body_pose)], 1))
 
 
 def turns_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -41,12 +56,6 @@ def turns_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     sin = 0.5 * np.linalg.norm(np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
                                          r[..., 1, 0] - r[..., 0, 1]], -1), axis=-1)
     return np.degrees(np.arctan2(sin, 0.5 * (np.trace(r, axis1=-2, axis2=-1) - 1.0)))
-
-
-def _about(axis: np.ndarray, angle: float) -> np.ndarray:
-    """The rotation (3, 3) by ``angle`` radians about the unit ``axis``."""
-    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * k @ k
 
 
 def _twist_angle(rotmat: np.ndarray, axis: np.ndarray) -> float:
@@ -75,7 +84,7 @@ def untwisted(rotmats: np.ndarray, neighbour: np.ndarray, bone_axes: np.ndarray,
     for joint, child in BONES:
         if not turned[joint]:
             continue
-        twist = _about(bone_axes[joint], _twist_angle(out[joint].T @ neighbour[joint], bone_axes[joint]))
+        twist = rodrigues(bone_axes[joint] * _twist_angle(out[joint].T @ neighbour[joint], bone_axes[joint]))
         if turns_deg((out[joint] @ twist)[None], neighbour[joint][None])[0] <= TURN_DEG:
             out[joint], out[child] = out[joint] @ twist, twist.T @ out[child]
     return out
@@ -91,27 +100,34 @@ def bone_axes(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
 
 
 def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.ndarray):
-    """The refit of frame ``k`` across a turn of the joints ``turned`` (22,) from frame ``neighbour``, as ``fit``'s
-    ``init`` and ``free_joints`` (a batch of one). A turn of the body (the global orientation, a joint of
-    the spine, legs or arms: how the body lies in depth): the neighbour's pose, every joint free. A turn of the
-    wrists alone (the hand's own ambiguity): frame ``k``'s pose with the wrists' rotations the neighbour's, those
-    alone free (the rest of the fit, and what its start took from the 3D landmarks, kept)."""
+    """The refit of frame ``k`` across a turn of the joints ``turned`` (22,) from frame ``neighbour``: its start
+    (one body) and free joints (55,). A turn of the body (the global orientation, a joint of the spine, legs or
+    arms: how the body lies in depth): the neighbour's pose, every joint free. A turn of the wrists alone (the
+    hand's own ambiguity): frame ``k``'s pose with the wrists' rotations the neighbour's, those alone free (the
+    rest of the fit, and what its start took from the 3D landmarks, kept)."""
     one = jax.tree.map(lambda a: np.array(a[k]), params)
-    free = np.zeros(55, bool)
+    free = np.zeros(55, np.float32)
     if turned[:WRISTS[0]].any():
-        one, free[:] = jax.tree.map(lambda a: np.array(a[neighbour]), params), True
+        one, free[:] = jax.tree.map(lambda a: np.array(a[neighbour]), params), 1.0
     else:
         one.body_pose[turned[1:]] = params.body_pose[neighbour][turned[1:]]
         free[:22] = turned
-    return jax.tree.map(lambda a: a[None], (one, free))
+    return one, free
+
+
+@functools.partial(jax.jit, static_argnames="config")
+def _refit(km, keypoints, pose, betas, free, lens, config: FitConfig) -> FitResult:
+    """One frame fitted again from ``pose (55, 3)`` with its shape ``betas`` held, in one compiled call (the
+    refits run one after another, each from its neighbour's outcome)."""
+    return fit_one(km, keypoints.astype(pose.dtype), pose, betas, None, lens, config, free=free.astype(pose.dtype),
+                   fit_betas=jnp.zeros((), pose.dtype))
 
 
 def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens, config: FitConfig | None,
              iterations: int = 20) -> Bodies:
     """``bodies`` with each frame across a turn of more than `TURN_DEG` fitted again from its neighbour (module
     docstring); ``lens`` the run's pinhole camera, ``config`` the fit's (None, as after copy-and-paste: unchanged).
-    Each refit is a batch of one frame (one more compile, once; 64 lanes of the same frame, the batch the person's
-    fit compiled, took 5.3 s for the two-person clip's 94 refits against 2.2 s)."""
+    Each refit is one compiled call on one frame (`_refit`)."""
     frames = np.flatnonzero(bodies.valid).tolist()
     if config is None or len(frames) < 2:
         return bodies
@@ -126,16 +142,16 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
     steps = [(frames[i], frames[i - 1]) for i in range(longest[-1] + 1, len(frames))] + [
         (frames[i], frames[i + 1]) for i in range(longest[0] - 1, -1, -1)]
     axes = bone_axes(model, np.asarray(bodies.params.betas[frames[0]], np.float64))
+    km, fit_lens = openpose_keypoint_model(model), lens_arrays(lens[0], lens[1], model.joint_template.dtype)
+    config = dataclasses.replace(config, iterations=iterations)
     for k, neighbour in steps:
         turned = turns_deg(rotmats[k], rotmats[neighbour]) > TURN_DEG
         if not turned.any():
             continue
         start, free = _start(out.params, k, neighbour, turned)
-        result = fit(model, keypoints_2d[k:k + 1], init=start, focal_length=lens[0],
-                     principal_point=lens[1], iterations=iterations, config=config, fixed_shape=True,
-                     free_joints=free)
-        refit = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
-                       np.asarray(result.camera_trans), np.ones(1, bool))
+        result = jax.tree.map(lambda a: np.asarray(a)[None], _refit(
+            km, keypoints_2d[k], start.full_pose(), start.betas, free, fit_lens, config))
+        refit = Bodies(result.params, result.camera_scale, result.camera_trans, np.ones(1, bool))
         error = reprojection_errors(model, refit.params, refit.camera_scale, refit.camera_trans,
                                     keypoints_2d[k:k + 1], *lens)[0]
         if bool(result.valid[0]) and error <= errors[k]:
