@@ -3,10 +3,11 @@
 
     python bench/people.py [--out bench/results]
 
-Per case and identity: the frames where the person is valid, and the largest step of their body's translation
-between consecutive valid frames, beside the nearest the two people come (metres). Ids that swapped would step by
-about the distance between the people; issue 24 asks for both people in ≥ 95 frames and no swap. Prints a table
-and writes ``<out>/people.json``.
+Per case and identity: the frames where the person is valid, the largest step of their body's translation
+between consecutive valid frames, beside the nearest the two people come (metres), and the share of joint-frames
+whose rotation turns by more than 45° between consecutive frames (`accuracy.rotation_coherence`). Ids that
+swapped would step by about the distance between the people; issue 24 asks for both people in ≥ 95 frames, no
+swap, and at most 1% of joint-frames turning > 45°. Prints a table and writes ``<out>/people.json``.
 """
 
 import argparse
@@ -16,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from accuracy import write_variant
+from accuracy import rotation_coherence, write_variant
 
 CLIP = Path(__file__).resolve().parents[1] / "tests" / "data" / "pose2sim_multi_cam01.mp4"
 CASES = ("as shot", "mirror", "rotate90")
@@ -29,7 +30,8 @@ def tracked(out: Path) -> dict:
     for person, m in motions.items():
         valid = m["valid"]
         steps = np.linalg.norm(np.diff(m["transl"], axis=0), axis=1)[valid[1:] & valid[:-1]]
-        people[person] = dict(frames=int(valid.sum()), largest_step_m=float(steps.max(initial=0.0)))
+        people[person] = dict(frames=int(valid.sum()), largest_step_m=float(steps.max(initial=0.0)),
+                              **rotation_coherence(m))
     if len(motions) == 2:
         a, b = motions.values()
         both = a["valid"] & b["valid"]
@@ -53,12 +55,13 @@ def main():
             run(RunConfig(video, max_people=2, overlay=False, progress=False), work / "run")
             results[case] = tracked(work / "run")
     print(f"\n{CLIP.name} and its variants, jaxmocap run --max-people 2, {platform.machine()}")
-    print(f"{'case':>10} {'ids':>3} {'frames per id':>16} {'largest step m':>16} {'nearest m':>9}")
+    print(f"{'case':>10} {'ids':>3} {'frames per id':>16} {'largest step m':>16} {'nearest m':>9} {'> 45°':>12}")
     for case, r in results.items():
         frames = " ".join(str(p["frames"]) for p in r["people"].values())
         steps = " ".join(f"{p['largest_step_m']:.2f}" for p in r["people"].values())
         nearest = "" if r["nearest_m"] is None else f"{r['nearest_m']:.2f}"
-        print(f"{case:>10} {len(r['people']):>3} {frames:>16} {steps:>16} {nearest:>9}")
+        flips = " ".join(f"{100 * p['rotation_change_over_45deg']:.1f}%" for p in r["people"].values())
+        print(f"{case:>10} {len(r['people']):>3} {frames:>16} {steps:>16} {nearest:>9} {flips:>12}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "people.json").write_text(json.dumps(dict(benchmark="people", machine=platform.machine(),
                                                           cases=results), indent=1))
