@@ -273,7 +273,10 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
             assert line or process.poll() is None, process.stderr.read()
         port = int(line.rsplit(":", 1)[1].split("/")[0])
         assert "http://127.0.0.1:" in line and _listening_on(port) == ["127.0.0.1"]  # this machine only
-        time.sleep(2.0)
+        deadline = time.monotonic() + 120  # until 10 frames are solved (the page's stats, once a second)
+        while json.loads(_get(port, "/stats.json")[2])["solved"] < 10:
+            assert time.monotonic() < deadline and process.poll() is None, "fewer than 10 frames solved in 120 s"
+            time.sleep(0.5)
         status, kind, _ = _get(port, "/")
         assert status == 200 and _get(port, "/../etc/passwd")[0] == 404
         process.send_signal(signal.SIGINT)

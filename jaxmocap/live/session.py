@@ -124,7 +124,7 @@ class Session:
         self.lens = lens_of(self.source.size, config.focal_length)
         self.detected, self.shown = Mailbox(), Mailbox()
         self.errors: list[BaseException] = []
-        self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, self.noun: 0}
+        self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, self.noun: 0}
         self._setup(file_sha256(model_path))
         self.viewer = None
         try:
@@ -259,7 +259,7 @@ class Session:
     def _update_stats(self, latencies: list[float], count: int, seconds: float) -> None:
         recent = latencies[-60:]
         self.stats = {"fps": len(latencies) / max(seconds, 1e-9), "latency_ms": float(np.median(recent)),
-                      "dropped": self._dropped(), self.noun: count}
+                      "dropped": self._dropped(), "solved": len(latencies), self.noun: count}
         if self.config.progress:
             s = self.stats
             print(f"\rlive: {s['fps']:.1f} frames/s, latency {s['latency_ms']:.0f} ms, {s['dropped']} dropped, "

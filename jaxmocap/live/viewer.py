@@ -29,7 +29,7 @@ class Viewer:
     def __init__(self, host: str = "127.0.0.1", port: int = 8080, timeout: float = 5.0):
         self._changed = threading.Condition()
         self._jpeg, self._count, self._closed = None, 0, False
-        self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "people": 0}
+        self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, "people": 0}
 
         class Handler(_Handler):
             pass
