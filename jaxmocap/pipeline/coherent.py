@@ -3,11 +3,12 @@ keypoints: one frame may turn a limb (or the whole body) towards the camera and 
 image. Here the valid frames are split where a body joint turns by more than `TURN_DEG` between consecutive frames;
 from the longest run of frames without such a turn outwards, a frame across one is fitted again from its
 neighbour's rotations of the joints that turned (`_start`), the person's shape held, and takes that fit where it
-reprojects no farther from the keypoints than the frame's own: the ambiguity resolved as in the frames beside it.
-A turn the image demands (the refit reprojects farther) stays. (Letting refits reproject 10% or 1 px farther took
-cam01 from 61.0 to 63.8-65.2 mm PA-MPJPE: poses the image does not support.) A frame that keeps its fit takes
-the twists of its turned bones from the neighbour (`untwisted`): a twist handed between a joint and its child (a
-thigh turned one way about itself and the shin back) moves no keypoint, so the image cannot choose it.
+reprojects no farther from the keypoints than the frame's own (within `TIE_PX`, a tie in float32): the ambiguity
+resolved as in the frames beside it. A turn the image demands (the refit reprojects farther) stays. (Letting
+refits reproject 10% or 1 px farther took cam01 from 61.0 to 63.8-65.2 mm PA-MPJPE: poses the image does not
+support.) A frame that keeps its fit takes the twists of its turned bones from the neighbour (`untwisted`): a
+twist handed between a joint and its child (a thigh turned one way about itself and the shin back) moves no
+keypoint, so the image cannot choose it.
 """
 
 import dataclasses
@@ -25,6 +26,7 @@ from jaxmocap.pipeline.records import Bodies
 from smplx_jax.rotations import rotmat_to_rotvec
 
 TURN_DEG = 45.0  # a body joint turning more than this from one frame to the next
+TIE_PX = 0.01  # a refit reprojecting within this of the frame's own fit ties with it (float32 round-off)
 WRISTS = (20, 21)  # SMPL-X joints
 # (joint, its one child) of the body's 22 SMPL-X joints, parents first: hips to feet, the spine, neck and head,
 # collars to wrists (the pelvis, the top of the spine, the wrists have several children; the feet and head none)
@@ -154,7 +156,7 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
         refit = Bodies(result.params, result.camera_scale, result.camera_trans, np.ones(1, bool))
         error = reprojection_errors(model, refit.params, refit.camera_scale, refit.camera_trans,
                                     keypoints_2d[k:k + 1], *lens)[0]
-        if bool(result.valid[0]) and error <= errors[k]:
+        if bool(result.valid[0]) and error <= errors[k] + TIE_PX:
             out = jax.tree.map(lambda a, b: np.concatenate([a[:k], b, a[k + 1:]]), out, refit)
             rotmats[k] = body_rotmats(refit.params.global_orient, refit.params.body_pose)[0]
         else:  # the frame keeps its fit, with the turned bones' twists the neighbour's (no keypoint moves)
