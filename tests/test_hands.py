@@ -7,6 +7,7 @@ import socket
 from pathlib import Path
 
 import cv2
+import jax
 import numpy as np
 import pytest
 import smplx
@@ -308,3 +309,12 @@ def test_a_phone_photo_is_read_upright(still, tmp_path):
     hands, upright = read_hands(tmp_path / "out" / "hands.npz"), still[2]
     assert hands["image_size"].tolist() == [640, 480] and hands["left_valid"][0]
     assert np.abs(hands["left_keypoints_2d"][0, :, :2] - upright["left_keypoints_2d"][0, :, :2]).max() < 10.0
+
+
+def test_the_live_hand_solve_runs_on_the_host_cpu():
+    """As the body's live solve (`test_live.test_the_solve_runs_on_the_host_cpu`): the hand models it solves with
+    are committed to the CPU, so `hand_step` runs there beside a GPU."""
+    from jaxmocap.live.hands import HandSolver
+
+    for leaf in jax.tree.leaves(HandSolver(MODEL).models):
+        assert leaf.committed and leaf.devices() == {jax.devices("cpu")[0]}

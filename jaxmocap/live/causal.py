@@ -1,7 +1,7 @@
 """The live path's solve of each person in each frame, causal: IK warm-started from the person's previous frame
 (its priors on the rest pose, as offline: a warm start is where the solve begins, not where it is held), a few
 iterations of the fit to the 2D keypoints, then the One-Euro filter; one compiled call per person and frame
-(`step`)."""
+(`step`), on the host's CPU (`host`)."""
 
 import dataclasses
 import functools
@@ -94,6 +94,13 @@ def fresh_state(num_betas: int) -> PersonState:
                        start_state(jnp.zeros((1, 1))), start_state(jnp.zeros((1, 3))), betas, jnp.zeros(()))
 
 
+def host() -> jax.Device:
+    """Where the live path solves: the host's CPU, also beside a GPU. One frame's solve is a few hundred small
+    operations in short loops, bound by each operation's launch, not its work: on an H200 machine a frame took
+    36 ms on the GPU and 12 ms on its CPU (docs/BENCHMARKS.md, "Live")."""
+    return jax.devices("cpu")[0]
+
+
 _MASKS = tuple(jnp.asarray(m, jnp.float32) for m in (BODY_IK_JOINTS, LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS))
 
 
@@ -142,34 +149,40 @@ class CausalSolver:
     """Each person's `step`, frame after frame, with their state kept by identity."""
 
     def __init__(self, model: smplx_jax.BodyModel, lens: Lens, settings: LiveSettings = LiveSettings()):
-        self.models = Models(keypoint_model(model, BLAZEPOSE_JOINTS),
-                             keypoint_model(model, constants.LEFT_HAND21_FROM_SMPLX),
-                             keypoint_model(model, constants.RIGHT_HAND21_FROM_SMPLX), openpose_keypoint_model(model))
-        self.lens = lens_arrays(lens[0], lens[1], jnp.float32)
+        self.device = host()
+        self.models = jax.device_put(Models(keypoint_model(model, BLAZEPOSE_JOINTS),
+                                            keypoint_model(model, constants.LEFT_HAND21_FROM_SMPLX),
+                                            keypoint_model(model, constants.RIGHT_HAND21_FROM_SMPLX),
+                                            openpose_keypoint_model(model)), self.device)
+        self.lens = jax.device_put(lens_arrays(lens[0], lens[1], jnp.float32), self.device)
         self.num_betas, self.num_expression = model.num_betas, model.num_expression
         self.settings = settings
         self.people: dict[int, tuple[PersonState, float]] = {}  # by identity: state, time last solved
 
     def warm_up(self) -> None:
         """Compile `step` (on nobody: zeros), so that the first person's frame does not wait for it."""
-        obs = (jnp.zeros((33, 4)), jnp.zeros((2, 21, 3)), jnp.zeros(2), jnp.zeros((67, 3)))
-        jax.block_until_ready(step(self.models, obs, fresh_state(self.num_betas), jnp.asarray(True),
-                                   jnp.float32(1.0), self.lens, self.num_expression, self.settings))
+        obs = jax.device_put(tuple(np.zeros(shape, np.float32) for shape in ((33, 4), (2, 21, 3), (2,), (67, 3))),
+                             self.device)
+        jax.block_until_ready(step(self.models, obs, self._fresh(), np.bool_(True), np.float32(1.0), self.lens,
+                                   self.num_expression, self.settings))
+
+    def _fresh(self) -> PersonState:
+        return jax.device_put(fresh_state(self.num_betas), self.device)
 
     def __call__(self, people: dict[int, Observations], now: float) -> dict[int, Solved]:
         """Each person of one frame (``Observations`` of one frame) at ``now`` seconds (the frame's time)."""
         solved = {}
         for person_id, obs in people.items():
-            arrays = tuple(jnp.asarray(a[0], jnp.float32) for a in (obs.body_world, obs.hands_world, obs.hands_conf,
-                                                                  obs.keypoints))
+            arrays = jax.device_put(tuple(np.asarray(a[0], np.float32) for a in (
+                obs.body_world, obs.hands_world, obs.hands_conf, obs.keypoints)), self.device)
             state, last = self.people.get(person_id, (None, -np.inf))
             fresh = state is None or now - last > self.settings.reset_after
             if fresh:
-                new = fresh_state(self.num_betas)
+                new = self._fresh()
                 state = new if state is None else new._replace(shape=state.shape, shape_seconds=state.shape_seconds)
-            dt = jnp.float32(max(now - last, 1e-3) if not fresh else 1.0)
+            dt = np.float32(max(now - last, 1e-3) if not fresh else 1.0)
             for _ in range(self.settings.warm_up if fresh else 1):
-                out, state = step(self.models, arrays, state, jnp.asarray(fresh), dt, self.lens,
+                out, state = step(self.models, arrays, state, np.bool_(fresh), dt, self.lens,
                                   self.num_expression, self.settings)
             solved[person_id] = jax.tree.map(np.asarray, out)
             self.people[person_id] = (state, now)

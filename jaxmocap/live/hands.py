@@ -23,6 +23,7 @@ from jaxmocap.hand_motion import hand_meshes, write_hands
 from jaxmocap.integrate.hand_fit import HAND_FIT, HandFit, hand_fit_from, hand_ik_one, hand_keypoint_model, palm_start
 from jaxmocap.integrate.inverse_kinematics import IKConfig
 from jaxmocap.integrate.keypoints import KeypointModel
+from jaxmocap.live.causal import host
 from jaxmocap.live.one_euro import Filtered, OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
 from jaxmocap.live.session import Session
 from jaxmocap.live.source import Frame
@@ -87,18 +88,23 @@ class HandSolver:
     """Each hand's `hand_step`, frame after frame, with its state kept by ``hand_id``."""
 
     def __init__(self, model: smplx_jax.BodyModel, settings: HandSettings = HandSettings()):
-        self.models = {side: hand_keypoint_model(model, side) for side in SIDES}
+        self.device = host()  # as the body's live solve (`jaxmocap.live.causal.host`)
+        self.models = jax.device_put({side: hand_keypoint_model(model, side) for side in SIDES}, self.device)
         self.settings = settings
         self.hands: dict[int, tuple[HandState, float]] = {}
 
     def warm_up(self) -> None:
         """Compile `hand_step` (on no hand: zeros) before the first frame."""
-        self._step("left", jnp.zeros((21, 3)), jnp.zeros((21, 3)), fresh_hand_state(), True, 1.0)
+        self._step("left", np.zeros((21, 3)), np.zeros((21, 3)), self._fresh(), True, 1.0)
+
+    def _fresh(self) -> HandState:
+        return jax.device_put(fresh_hand_state(), self.device)
 
     def _step(self, side, world, keypoints, state, fresh, dt):
-        return jax.block_until_ready(hand_step(self.models[side], jnp.asarray(side == "left"),
-                                               jnp.asarray(world, jnp.float32), jnp.asarray(keypoints, jnp.float32),
-                                               state, jnp.asarray(fresh), jnp.float32(dt), self.settings))
+        world, keypoints = jax.device_put((np.asarray(world, np.float32), np.asarray(keypoints, np.float32)),
+                                          self.device)
+        return jax.block_until_ready(hand_step(self.models[side], np.bool_(side == "left"), world, keypoints, state,
+                                               np.bool_(fresh), np.float32(dt), self.settings))
 
     def __call__(self, hands: list[Hand], now: float) -> dict[int, HandFit]:
         """Each hand of one frame at ``now`` seconds (the frame's time), by ``hand_id``."""
@@ -106,7 +112,7 @@ class HandSolver:
         for hand in hands:
             state, last = self.hands.get(hand.hand_id, (None, -np.inf))
             fresh = state is None or now - last > self.settings.reset_after
-            state = fresh_hand_state() if fresh else state
+            state = self._fresh() if fresh else state
             dt = max(now - last, 1e-3) if not fresh else 1.0
             for _ in range(self.settings.warm_up if fresh else 1):
                 out, state = self._step(hand.side, hand.world, hand.keypoints_2d, state, fresh, dt)
