@@ -34,7 +34,7 @@ from jaxmocap.live.stream import frame_message, parse_address, person_message
 from jaxmocap.live.viewer import Viewer
 from jaxmocap.motion import motion_params, read_motion
 from jaxmocap.pipeline import RunConfig, run
-from jaxmocap.pipeline.observe import Observations
+from jaxmocap.pipeline.observe import Observations, _no_one
 from jaxmocap.pipeline.stages import lens_of
 
 CLIP = Path(__file__).resolve().parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -231,8 +231,7 @@ def test_the_solve_runs_on_the_host_cpu():
     (`causal.host`; on an H200 machine 12 ms there against 36 ms on the GPU), its inputs and state committed there
     (uncommitted arrays would follow JAX's default device)."""
     solver = CausalSolver(smplx_jax.load_model(smplx_jax.default_model_path()), lens_of((1080, 1920)))
-    nobody = Observations(np.zeros((1, 67, 3)), np.zeros((1, 33, 4)), np.zeros((1, 2, 21, 3)), np.zeros((1, 2)),
-                          np.full((1, 4), np.nan), np.full((1, 2, 4), np.nan), np.zeros(1, bool))
+    nobody = Observations(**_no_one(1))
     solver({0: nobody}, 0.0)
     state, _ = solver.people[0]
     for leaf in jax.tree.leaves((solver.models, solver.lens, state)):
