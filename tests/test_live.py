@@ -249,9 +249,9 @@ def test_live_agrees_with_the_offline_run(played, tmp_path):
 
 def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
     """Each solved frame waits at most for the detection and the solve in progress, then its own: its latency is
-    within two detections' and two solves' time, and the solver is never idle while frames come, so it solves about
-    as many as the stream's 1.67 s hold solves (all measured in the same run, so that a machine busy with other work
-    slows them alike)."""
+    within two detections' and two solves' time, and the slower of the two stages is never idle while frames come,
+    so the solver takes about as many frames as the stream's 1.67 s hold of that stage's steps (all measured in the
+    same run, so that a machine busy with other work slows them alike: there, detection may be the slower)."""
     solve, observe, solves_ms, detections_ms = CausalSolver.__call__, Session._observe, [], []
 
     def timed(function, times, pause=0.0):
@@ -267,7 +267,9 @@ def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
     monkeypatch.setattr(Session, "_observe", timed(observe, detections_ms))
     report = live(LiveConfig(CLIP, realtime=True, progress=False))
     assert report.read == 100 and report.solved + report.dropped == 100
-    assert 0.6 * 1000 * 100 / 60 / np.mean(solves_ms) <= report.solved <= 40, (report.summary(), np.mean(solves_ms))
+    step_ms = max(np.mean(solves_ms), np.mean(detections_ms))
+    assert 0.6 * 1000 * 100 / 60 / step_ms <= report.solved <= 40, (report.summary(), np.mean(solves_ms),
+                                                                      np.mean(detections_ms))
     limit = 1.25 * 2 * (np.percentile(detections_ms, 95) + np.percentile(solves_ms, 95))
     assert np.percentile(report.latency_ms, 95) <= limit, (report.summary(), limit)
 
