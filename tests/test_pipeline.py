@@ -582,6 +582,50 @@ def test_a_frame_turned_against_its_neighbours_is_fitted_again_from_them():
             np.testing.assert_allclose(out.params.body_pose[4, others], bodies.params.body_pose[4, others], atol=1e-6)
 
 
+def test_a_hand_turned_in_two_frames_with_its_fingers_bent_to_match_takes_its_neighbours_turn():
+    """The left hand flat in every frame but 4 and 5, where its wrist is turned 70 degrees with the fingers bent (by
+    the fit itself, the wrist held) to match the flat hand's image: a hand's own ambiguity, each frame's keypoints
+    those of its own pose. `coherent` refits frames 4 and 5 from the neighbours' wrist with that hand's fingers free
+    and takes the refit within `WRIST_TIE_PX`: the wrist within 3 degrees of the neighbours', the keypoints within
+    0.3 px. (Before, the fingers were held and the tie was `TIE_PX`: the turn stayed.)"""
+    from jaxmocap.integrate.fitting import lens_arrays, openpose_keypoint_model
+    from jaxmocap.integrate.motion_arrays import reprojection_errors
+    from jaxmocap.pipeline import Bodies
+    from jaxmocap.pipeline.coherent import _refit, body_rotmats, coherent, rodrigues, turns_deg
+
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    lens = (1000.0, np.array([500.0, 500.0]))
+    flat, turned = np.array([-0.447, 1.45, -1.088]), np.array([0.526, 0.558, -1.44])  # 70 degrees apart
+
+    def posed(wrist, fingers):  # one body: the left arm forward, the left wrist and fingers as given
+        params = jax.tree.map(np.array, smplx_jax.SMPLXParams.zeros())
+        params.global_orient[0], params.body_pose[15], params.transl[2] = np.pi, (0.0, 1.05, 0.0), 3.0
+        params.body_pose[19], params.left_hand_pose[:] = wrist, fingers
+        return params
+
+    def keypoints_of(params):
+        joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params))
+        joints = joints[:, constants.OPENPOSE67_FROM_SMPLX]
+        return np.concatenate([lens[0] * joints[..., :2] / joints[..., 2:] + lens[1], np.ones((len(joints), 67, 1))],
+                              -1)
+
+    fingers_free = np.zeros(55, np.float32)
+    fingers_free[25:40] = 1.0
+    bent = _refit(openpose_keypoint_model(model), keypoints_of(jax.tree.map(lambda a: a[None], posed(flat, 0.0)))[0],
+                  posed(turned, 0.0).full_pose(), np.zeros(10, np.float32), fingers_free,
+                  lens_arrays(lens[0], lens[1], np.float32), dataclasses.replace(FIT_FROM_IK, iterations=20))
+    poses = [posed(flat, 0.0)] * 4 + [posed(turned, np.asarray(bent.params.left_hand_pose))] * 2 + [
+        posed(flat, 0.0)] * 2
+    params = jax.tree.map(lambda *a: np.stack(a), *poses)
+    keypoints = keypoints_of(params)
+    out = coherent(model, Bodies(params, np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool)), keypoints,
+                   lens, FIT_FROM_IK)
+    wrists = body_rotmats(out.params.global_orient, out.params.body_pose)[:, 20]
+    assert turns_deg(wrists, rodrigues(flat)).max() < 3.0, turns_deg(wrists, rodrigues(flat))
+    errors = reprojection_errors(model, out.params, out.camera_scale, out.camera_trans, keypoints, *lens)
+    assert errors.max() < 0.3, errors
+
+
 def test_a_twist_handed_between_a_joint_and_its_child_is_handed_back():
     """Frame 4 with the right thigh turned 100 degrees about itself and the shin back by as much, the neck and head
     likewise (the keypoints cannot tell: `untwisted` moves none of the 127 joints by more than 1e-5 m): `coherent`

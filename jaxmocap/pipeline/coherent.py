@@ -6,9 +6,12 @@ neighbour's rotations of the joints that turned (`_start`), the person's shape h
 reprojects no farther from the keypoints than the frame's own (within `TIE_PX`, a tie in float32): the ambiguity
 resolved as in the frames beside it. A turn the image demands (the refit reprojects farther) stays. (Letting
 refits reproject 10% or 1 px farther took cam01 from 61.0 to 63.8-65.2 mm PA-MPJPE: poses the image does not
-support.) A frame that keeps its fit takes the twists of its turned bones from the neighbour (`untwisted`): a
-twist handed between a joint and its child (a thigh turned one way about itself and the shin back) moves no
-keypoint, so the image cannot choose it.
+support.) A turn of the wrists alone is the hand's own ambiguity, its fingers bent to match either turn: refitted
+with that hand's fingers free, it is taken within `WRIST_TIE_PX` (those refits of cam01 at 30 fps came within
+0.7-1 px; taken, its joint-frames turning > 45 degrees went from 1.1 to 0.6%; cam01 from 59.3 to 59.9 mm, at
+half scale from 60.5 to 57.6, each other variant of cam01 and cam03 within 0.1 mm). A frame that keeps its fit
+takes the twists of its turned bones from the neighbour (`untwisted`): a twist handed between a joint and its
+child (a thigh turned one way about itself and the shin back) moves no keypoint, so the image cannot choose it.
 """
 
 import dataclasses
@@ -27,6 +30,7 @@ from smplx_jax.rotations import rotmat_to_rotvec
 
 TURN_DEG = 45.0  # a body joint turning more than this from one frame to the next
 TIE_PX = 0.01  # a refit reprojecting within this of the frame's own fit ties with it (float32 round-off)
+WRIST_TIE_PX = 1.0  # the same for a refit of the wrists alone (the fingers can bend to match either turn)
 WRISTS = (20, 21)  # SMPL-X joints
 # (joint, its one child) of the body's 22 SMPL-X joints, parents first: hips to feet, the spine, neck and head,
 # collars to wrists (the pelvis, the top of the spine, the wrists have several children; the feet and head none)
@@ -105,8 +109,8 @@ def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.nda
     """The refit of frame ``k`` across a turn of the joints ``turned`` (22,) from frame ``neighbour``: its start
     (one body) and free joints (55,). A turn of the body (the global orientation, a joint of the spine, legs or
     arms: how the body lies in depth): the neighbour's pose, every joint free. A turn of the wrists alone (the
-    hand's own ambiguity): frame ``k``'s pose with the wrists' rotations the neighbour's, those alone free (the
-    rest of the fit, and what its start took from the 3D landmarks, kept)."""
+    hand's own ambiguity): frame ``k``'s pose with the wrists' rotations the neighbour's, those and their hands'
+    fingers free (the rest of the fit, and what its start took from the 3D landmarks, kept)."""
     one = jax.tree.map(lambda a: np.array(a[k]), params)
     free = np.zeros(55, np.float32)
     if turned[:WRISTS[0]].any():
@@ -114,6 +118,7 @@ def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.nda
     else:
         one.body_pose[turned[1:]] = params.body_pose[neighbour][turned[1:]]
         free[:22] = turned
+        free[25:40], free[40:55] = turned[WRISTS[0]], turned[WRISTS[1]]  # the left and right hands' fingers
     return one, free
 
 
@@ -156,7 +161,8 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
         refit = Bodies(result.params, result.camera_scale, result.camera_trans, np.ones(1, bool))
         error = reprojection_errors(model, refit.params, refit.camera_scale, refit.camera_trans,
                                     keypoints_2d[k:k + 1], *lens)[0]
-        if bool(result.valid[0]) and error <= errors[k] + TIE_PX:
+        tie = TIE_PX if turned[:WRISTS[0]].any() else WRIST_TIE_PX
+        if bool(result.valid[0]) and error <= errors[k] + tie:
             out = jax.tree.map(lambda a, b: np.concatenate([a[:k], b, a[k + 1:]]), out, refit)
             rotmats[k] = body_rotmats(refit.params.global_orient, refit.params.body_pose)[0]
         else:  # the frame keeps its fit, with the turned bones' twists the neighbour's (no keypoint moves)
