@@ -195,6 +195,8 @@ def test_jit_compiles_once_per_padded_size(model, noisy, noisy_fit, monkeypatch)
     after = compiled()
     fit(model, noisy.keypoints[:T - 5], sub)
     assert compiled() == after  # a second call compiles nothing
+    fit(model, noisy.keypoints[:T - 5], sub, iterations=7)
+    assert compiled() == after  # nor one with another step cap (the batches take their steps as an argument)
     assert bucket_size(T - 5, fitting.BUCKETS) == bucket_size(T, fitting.BUCKETS) == T
     # padding does not change the frames' results: those done in the first round (the same batch of 32) are the
     # same; the others ran on in other batches, whose float32 sums round in another order, to fits as good (measured

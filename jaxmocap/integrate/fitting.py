@@ -230,14 +230,15 @@ def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progre
         return jax.tree.map(keep, map_in_buckets(lambda chunk, n: fn(*shard_frames(chunk, _rows(chunk))), tree,
                                                  BUCKETS))
 
+    program = dataclasses.replace(config, iterations=0)  # the cap is this loop's: another compiles nothing new
     problem, start, camera, state = batches(
-        lambda *chunk: _start_batch(km, *chunk, lens, config, fixed_shape), frames)
+        lambda *chunk: _start_batch(km, *chunk, lens, program, fixed_shape), frames)
     y = jax.tree.map(np.copy, start)  # (its rows are overwritten round by round; the start's error reads start)
     steps, done = np.zeros(len(frames[0]), np.int32), np.zeros(len(frames[0]), bool)
     while (active := np.flatnonzero(~done)).size:
         budget = np.minimum(ROUND_STEPS, config.iterations - steps[active]).astype(np.int32)
         picked = jax.tree.map(lambda a: a[active], (problem, y, state))
-        moved = batches(lambda *chunk: _advance_batch(km, *chunk, config), (*picked, budget))
+        moved = batches(lambda *chunk: _advance_batch(km, *chunk, program), (*picked, budget))
         for whole, part in zip(jax.tree.leaves((y, state)), jax.tree.leaves(moved[:2])):
             whole[active] = part
         steps[active] += moved[2]
