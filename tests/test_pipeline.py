@@ -586,8 +586,9 @@ def test_a_hand_turned_in_two_frames_with_its_fingers_bent_to_match_takes_its_ne
     """The left hand flat in every frame but 4 and 5, where its wrist is turned 70 degrees with the fingers bent (by
     the fit itself, the wrist held) to match the flat hand's image: a hand's own ambiguity, each frame's keypoints
     those of its own pose. `coherent` refits frames 4 and 5 from the neighbours' wrist with that hand's fingers free
-    and takes the refit within `WRIST_TIE_PX`: the wrist within 3 degrees of the neighbours', the keypoints within
-    0.3 px. (Before, the fingers were held and the tie was `TIE_PX`: the turn stayed.)"""
+    and takes the refit within `WRIST_TIE_PX`: the wrist within 2.5 degrees of the neighbours', the keypoints within
+    0.2 px (measured 1.7 degrees, 0.14 px). With the fingers held and the tie `TIE_PX` the turn stayed (70 degrees);
+    with the fingers held and this tie, 7.4 degrees."""
     from jaxmocap.integrate.fitting import lens_arrays, openpose_keypoint_model
     from jaxmocap.integrate.motion_arrays import reprojection_errors
     from jaxmocap.pipeline import Bodies
@@ -621,9 +622,9 @@ def test_a_hand_turned_in_two_frames_with_its_fingers_bent_to_match_takes_its_ne
     out = coherent(model, Bodies(params, np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool)), keypoints,
                    lens, FIT_FROM_IK)
     wrists = body_rotmats(out.params.global_orient, out.params.body_pose)[:, 20]
-    assert turns_deg(wrists, rodrigues(flat)).max() < 3.0, turns_deg(wrists, rodrigues(flat))
+    assert turns_deg(wrists, rodrigues(flat)).max() < 2.5, turns_deg(wrists, rodrigues(flat))
     errors = reprojection_errors(model, out.params, out.camera_scale, out.camera_trans, keypoints, *lens)
-    assert errors.max() < 0.3, errors
+    assert errors.max() < 0.2, errors
 
 
 def test_a_twist_handed_between_a_joint_and_its_child_is_handed_back():
