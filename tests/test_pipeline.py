@@ -511,6 +511,14 @@ def test_run_config_refuses_what_cannot_run(options, message):
         RunConfig(CLIP, **options)
 
 
+def _pinhole_keypoints(model, params, lens):
+    """``(T, 67, 3)``: the OpenPose keypoints of the bodies ``params`` (T leading) through the pinhole ``lens``
+    (focal length, principal point), every one seen."""
+    joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params))
+    joints = joints[:, constants.OPENPOSE67_FROM_SMPLX]
+    return np.concatenate([lens[0] * joints[..., :2] / joints[..., 2:] + lens[1], np.ones((len(joints), 67, 1))], -1)
+
+
 def test_smoothing_keeps_fits_it_would_take_off_their_person():
     """Fits that flip between two arm poses from frame to frame average to neither: each keeps its own pose; a
     slowly moving arm is smoothed (and stays on its keypoints)."""
@@ -523,10 +531,7 @@ def test_smoothing_keeps_fits_it_would_take_off_their_person():
         params = jax.tree.map(lambda a: np.repeat(np.asarray(a)[None], FRAMES, 0), smplx_jax.SMPLXParams.zeros())
         params.body_pose[:, 15, 2] = angles  # the left shoulder about the camera axis
         params.transl[:, 2] = 3.0
-        joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params))
-        joints = joints[:, constants.OPENPOSE67_FROM_SMPLX]
-        keypoints = np.concatenate([lens[0] * joints[..., :2] / joints[..., 2:] + lens[1], np.ones((FRAMES, 67, 1))],
-                                   axis=-1)
+        keypoints = _pinhole_keypoints(model, params, lens)
         bodies = Bodies(params, np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool))
         out = smoothed(model, bodies, keypoints, lens)
         errors = reprojection_errors(model, out.params, out.camera_scale, out.camera_trans, keypoints, *lens)
@@ -554,11 +559,6 @@ def test_a_frame_turned_against_its_neighbours_is_fitted_again_from_them():
         params.transl[:, 2] = 3.0
         return params
 
-    def keypoints_of(params):
-        joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params))
-        joints = joints[:, constants.OPENPOSE67_FROM_SMPLX]
-        return np.concatenate([lens[0] * joints[..., :2] / joints[..., 2:] + lens[1], np.ones((FRAMES, 67, 1))], -1)
-
     forward = np.tile([0.0, 1.05, 0.0], (FRAMES, 1))
     flipped = forward.copy()
     flipped[4, 1] = -1.05
@@ -570,7 +570,7 @@ def test_a_frame_turned_against_its_neighbours_is_fitted_again_from_them():
     cases = (("flipped", (forward, wrist), (flipped, wrist)), ("swung", (swung, wrist), (swung, wrist)),
              ("wrist", (forward, wrist), (forward, twisted)))
     for name, truth, fitted in cases:
-        keypoints = keypoints_of(posed(*truth))
+        keypoints = _pinhole_keypoints(model, posed(*truth), lens)
         bodies = Bodies(posed(*fitted), np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool))
         out = coherent(model, bodies, keypoints, lens, FIT_FROM_IK)
         errors = reprojection_errors(model, out.params, out.camera_scale, out.camera_trans, keypoints, *lens)
@@ -604,21 +604,16 @@ def test_a_hand_turned_in_two_frames_with_its_fingers_bent_to_match_takes_its_ne
         params.body_pose[19], params.left_hand_pose[:] = wrist, fingers
         return params
 
-    def keypoints_of(params):
-        joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params))
-        joints = joints[:, constants.OPENPOSE67_FROM_SMPLX]
-        return np.concatenate([lens[0] * joints[..., :2] / joints[..., 2:] + lens[1], np.ones((len(joints), 67, 1))],
-                              -1)
-
     fingers_free = np.zeros(55, np.float32)
-    fingers_free[25:40] = 1.0
-    bent = _refit(openpose_keypoint_model(model), keypoints_of(jax.tree.map(lambda a: a[None], posed(flat, 0.0)))[0],
-                  posed(turned, 0.0).full_pose(), np.zeros(10, np.float32), fingers_free,
-                  lens_arrays(lens[0], lens[1], np.float32), dataclasses.replace(FIT_FROM_IK, iterations=20))
+    fingers_free[list(constants.LEFT_HAND_JOINTS)] = 1.0
+    flat_image = _pinhole_keypoints(model, jax.tree.map(lambda a: a[None], posed(flat, 0.0)), lens)[0]
+    bent = _refit(openpose_keypoint_model(model), flat_image, posed(turned, 0.0).full_pose(), np.zeros(10, np.float32),
+                  fingers_free, lens_arrays(lens[0], lens[1], np.float32),
+                  dataclasses.replace(FIT_FROM_IK, iterations=20))
     poses = [posed(flat, 0.0)] * 4 + [posed(turned, np.asarray(bent.params.left_hand_pose))] * 2 + [
         posed(flat, 0.0)] * 2
     params = jax.tree.map(lambda *a: np.stack(a), *poses)
-    keypoints = keypoints_of(params)
+    keypoints = _pinhole_keypoints(model, params, lens)
     out = coherent(model, Bodies(params, np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool)), keypoints,
                    lens, FIT_FROM_IK)
     wrists = body_rotmats(out.params.global_orient, out.params.body_pose)[:, 20]
@@ -656,9 +651,7 @@ def test_a_twist_handed_between_a_joint_and_its_child_is_handed_back():
     np.testing.assert_allclose(joints_of(fitted), joints_of(params), atol=1e-5)
     handed = untwisted(twisted, rotmats[3], axes, np.ones(22, bool))
     assert turns_deg(handed, rotmats[3]).max() < 1e-3
-    keypoints = joints_of(params)[:, constants.OPENPOSE67_FROM_SMPLX]
-    keypoints = np.concatenate([lens[0] * keypoints[..., :2] / keypoints[..., 2:] + lens[1],
-                                np.ones((FRAMES, 67, 1))], -1)
+    keypoints = _pinhole_keypoints(model, params, lens)
     assert turns_deg(twisted, rotmats[3])[[2, 5, 12, 15]].min() > 90
     out = coherent(model, Bodies(fitted, np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool)), keypoints,
                    lens, FIT_FROM_IK)

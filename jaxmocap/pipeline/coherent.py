@@ -26,6 +26,7 @@ from jaxmocap.integrate import FitConfig, FitResult
 from jaxmocap.integrate.fitting import fit_one, lens_arrays, openpose_keypoint_model
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.pipeline.records import Bodies
+from smplx_jax import constants
 from smplx_jax.rotations import rotmat_to_rotvec
 
 TURN_DEG = 45.0  # a body joint turning more than this from one frame to the next
@@ -107,19 +108,20 @@ def bone_axes(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
 
 def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.ndarray):
     """The refit of frame ``k`` across a turn of the joints ``turned`` (22,) from frame ``neighbour``: its start
-    (one body) and free joints (55,). A turn of the body (the global orientation, a joint of the spine, legs or
-    arms: how the body lies in depth): the neighbour's pose, every joint free. A turn of the wrists alone (the
-    hand's own ambiguity): frame ``k``'s pose with the wrists' rotations the neighbour's, those and their hands'
-    fingers free (the rest of the fit, and what its start took from the 3D landmarks, kept)."""
+    (one body), free joints (55,) and tie. A turn of the body (the global orientation, a joint of the spine, legs
+    or arms: how the body lies in depth): the neighbour's pose, every joint free, `TIE_PX`. A turn of the wrists
+    alone (the hand's own ambiguity): frame ``k``'s pose with the wrists' rotations the neighbour's, those and
+    their hands' fingers free (the rest of the fit, and what its start took from the 3D landmarks, kept),
+    `WRIST_TIE_PX`."""
     one = jax.tree.map(lambda a: np.array(a[k]), params)
     free = np.zeros(55, np.float32)
     if turned[:WRISTS[0]].any():
         one, free[:] = jax.tree.map(lambda a: np.array(a[neighbour]), params), 1.0
-    else:
-        one.body_pose[turned[1:]] = params.body_pose[neighbour][turned[1:]]
-        free[:22] = turned
-        free[25:40], free[40:55] = turned[WRISTS[0]], turned[WRISTS[1]]  # the left and right hands' fingers
-    return one, free
+        return one, free, TIE_PX
+    one.body_pose[turned[1:]] = params.body_pose[neighbour][turned[1:]]
+    free[:22] = turned
+    free[list(constants.LEFT_HAND_JOINTS)], free[list(constants.RIGHT_HAND_JOINTS)] = turned[list(WRISTS)]
+    return one, free, WRIST_TIE_PX
 
 
 @functools.partial(jax.jit, static_argnames="config")
@@ -155,13 +157,12 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
         turned = turns_deg(rotmats[k], rotmats[neighbour]) > TURN_DEG
         if not turned.any():
             continue
-        start, free = _start(out.params, k, neighbour, turned)
+        start, free, tie = _start(out.params, k, neighbour, turned)
         result = jax.tree.map(lambda a: np.asarray(a)[None], _refit(
             km, keypoints_2d[k], start.full_pose(), start.betas, free, fit_lens, config))
         refit = Bodies(result.params, result.camera_scale, result.camera_trans, np.ones(1, bool))
         error = reprojection_errors(model, refit.params, refit.camera_scale, refit.camera_trans,
                                     keypoints_2d[k:k + 1], *lens)[0]
-        tie = TIE_PX if turned[:WRISTS[0]].any() else WRIST_TIE_PX
         if bool(result.valid[0]) and error <= errors[k] + tie:
             out = jax.tree.map(lambda a, b: np.concatenate([a[:k], b, a[k + 1:]]), out, refit)
             rotmats[k] = body_rotmats(refit.params.global_orient, refit.params.body_pose)[0]
