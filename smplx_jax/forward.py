@@ -30,44 +30,57 @@ class Skeleton(NamedTuple):
     joints: Float[Array, "55 3"]
 
 
-# 3x3 products written out by component: XLA fuses these into a few loops, far faster on CPU than a
-# broadcast-and-reduce or a batched dot of tiny matrices.
+# 3x3 products as three broadcast terms: XLA fuses them into one loop, faster on CPU than a broadcast-and-reduce
+# or a batched dot of tiny matrices, and a program a tenth the size of one written out entry by entry.
 def _matmul3(a, b):
-    return jnp.stack([
-        jnp.stack([a[..., i, 0] * b[..., 0, k] + a[..., i, 1] * b[..., 1, k] + a[..., i, 2] * b[..., 2, k]
-                   for k in range(3)], axis=-1)
-        for i in range(3)], axis=-2)
+    return sum(a[..., :, k, None] * b[..., None, k, :] for k in range(3))
 
 
 def _matvec3(a, v):
-    return jnp.stack([a[..., i, 0] * v[..., 0] + a[..., i, 1] * v[..., 1] + a[..., i, 2] * v[..., 2]
-                      for i in range(3)], axis=-1)
+    return sum(a[..., :, k] * v[..., None, k] for k in range(3))
+
+
+class _Levels(NamedTuple):
+    """The joints in order of depth in the tree (``order``), each depth a slice of it (``bounds``), the parents of
+    each depth as places in the depth above (``parent_slots``), and each joint's place in ``order`` (``place``)."""
+
+    order: tuple[int, ...]
+    bounds: tuple[tuple[int, int], ...]
+    parent_slots: tuple[tuple[int, ...], ...]
+    place: tuple[int, ...]
 
 
 @functools.lru_cache(maxsize=None)
-def _levels(parents: tuple[int, ...]) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
-    """Joints grouped by depth in the tree (root excluded), each group with its parents."""
+def _levels(parents: tuple[int, ...]) -> _Levels:
     depth = [0] * len(parents)
     for j in range(1, len(parents)):
         depth[j] = depth[parents[j]] + 1
-    groups = []
-    for d in range(1, max(depth) + 1):
-        joints = tuple(j for j in range(len(parents)) if depth[j] == d)
-        groups.append((joints, tuple(parents[j] for j in joints)))
-    return tuple(groups)
+    groups = [[j for j in range(len(parents)) if depth[j] == d] for d in range(max(depth) + 1)]
+    order = [j for group in groups for j in group]
+    place = [0] * len(parents)
+    for i, j in enumerate(order):
+        place[j] = i
+    starts = np.cumsum([0] + [len(g) for g in groups])
+    bounds = tuple((int(a), int(b)) for a, b in zip(starts[:-1], starts[1:]))
+    parent_slots = tuple(tuple(place[parents[j]] - starts[d - 1] for j in groups[d]) for d in range(1, len(groups)))
+    return _Levels(tuple(order), bounds, parent_slots, tuple(place))
 
 
 def kinematic_chain(rel_rotmats: Float[Array, "J 3 3"], rest_joints: Float[Array, "J 3"], parents: tuple[int, ...]):
-    """Global rotations and positions of the joints, ``G_i = G_parent [R_i | J_i - J_parent]``."""
-    glob_rotmats = jnp.zeros_like(rel_rotmats).at[0].set(rel_rotmats[0])
-    positions = jnp.zeros_like(rest_joints).at[0].set(rest_joints[0])
-    for joints, par in _levels(parents):
-        joints, par = np.array(joints), np.array(par)  # fresh arrays: a cached constant would keep its dtype
-        offsets = rest_joints[joints] - rest_joints[par]
-        parent_rotmats = glob_rotmats[par]
-        glob_rotmats = glob_rotmats.at[joints].set(_matmul3(parent_rotmats, rel_rotmats[joints]))
-        positions = positions.at[joints].set(_matvec3(parent_rotmats, offsets) + positions[par])
-    return glob_rotmats, positions
+    """Global rotations and positions of the joints, ``G_i = G_parent [R_i | J_i - J_parent]``, one depth of the
+    tree at a time; joints are gathered into depth order once and back once (no scatter: on CPU each is a kernel
+    of its own, in the program and in its derivatives)."""
+    levels = _levels(parents)
+    order, place = np.array(levels.order), np.array(levels.place)  # fresh arrays: a cached constant keeps its dtype
+    offsets = (rest_joints - rest_joints[np.maximum(np.array(parents), 0)])[order]
+    rel_rotmats = rel_rotmats[order]
+    rotmats, positions = [rel_rotmats[:1]], [rest_joints[:1]]
+    for (start, stop), slots in zip(levels.bounds[1:], levels.parent_slots):
+        slots = np.array(slots)
+        parent_rotmats = rotmats[-1][slots]
+        rotmats.append(_matmul3(parent_rotmats, rel_rotmats[start:stop]))
+        positions.append(_matvec3(parent_rotmats, offsets[start:stop]) + positions[-1][slots])
+    return jnp.concatenate(rotmats)[place], jnp.concatenate(positions)[place]
 
 
 # Up to this many joints per vertex, skinning gathers each vertex's joints' transforms; beyond, one dense
