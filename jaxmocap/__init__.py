@@ -1,3 +1,7 @@
 """jaxmocap: fast monocular 3D whole-body motion capture in JAX (a rebuild of FrankMocap)."""
 
+from jaxmocap.xla_options import set_cpu_options
+
 __version__ = "0.1.0"
+
+set_cpu_options()  # before JAX starts: every module of the package (and of train) is imported after this

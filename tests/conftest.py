@@ -58,6 +58,7 @@ def pytest_unconfigure(config):
         shutil.rmtree(os.environ["JAXMOCAP_TEST_CACHE"], ignore_errors=True)
 
 
+import jaxmocap  # noqa: E402, F401  (sets XLA's options before anything starts JAX)
 import smplx_jax  # noqa: E402
 from random_model import random_model_arrays  # noqa: E402
 from smplx_jax.default_model import default_model_path  # noqa: E402

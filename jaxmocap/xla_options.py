@@ -1,0 +1,32 @@
+"""XLA options for jaxmocap's programs, set when the package is imported (it starts no JAX computation).
+
+XLA's newer CPU fusion emitters (its default in recent jaxlib) compile the fit's programs a third slower than its
+older ones and run them no faster (docs/BENCHMARKS.md, "Compile time"), so the older ones are asked for. Only for
+the jaxlib versions known to have the option (XLA stops a process whose ``XLA_FLAGS`` name an option it does not
+know), and never over the user's own choice in ``XLA_FLAGS``.
+"""
+
+import os
+import re
+from importlib import metadata
+
+OPTION, VALUE = "xla_cpu_use_fusion_emitters", "false"
+KNOWN_JAXLIB = ((0, 5, 3), (0, 11))  # the option exists in 0.5.3, 0.6.2, 0.7.2, 0.9.0 and 0.10.2 (checked)
+
+
+def _release(version: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in re.match(r"(\d+)\.(\d+)\.(\d+)", version).groups())
+
+
+def set_cpu_options(environ=os.environ) -> bool:
+    """Add ``--xla_cpu_use_fusion_emitters=false`` to ``XLA_FLAGS`` unless it names the option already or jaxlib
+    is outside `KNOWN_JAXLIB`; True when added."""
+    flags = environ.get("XLA_FLAGS", "")
+    try:
+        release = _release(metadata.version("jaxlib"))
+    except metadata.PackageNotFoundError:
+        return False
+    if OPTION in flags or not KNOWN_JAXLIB[0] <= release < KNOWN_JAXLIB[1]:
+        return False
+    environ["XLA_FLAGS"] = f"{flags} --{OPTION}={VALUE}".strip()
+    return True

@@ -1,0 +1,49 @@
+"""XLA's options: the older CPU fusion emitters asked for on import, before JAX starts, never over the user's."""
+
+import subprocess
+import sys
+from importlib import metadata
+
+from jaxmocap import xla_options
+from jaxmocap.xla_options import set_cpu_options
+
+# Records XLA_FLAGS as JAX starts its backend (the moment XLA reads them), then imports the module given.
+SPY = """
+import os, sys
+from jax._src import xla_bridge
+start = xla_bridge._init_backend
+def spy(*args, **kwargs):
+    print("XLA_FLAGS at start:", os.environ.get("XLA_FLAGS"))
+    return start(*args, **kwargs)
+xla_bridge._init_backend = spy
+__import__(sys.argv[1])
+import jax
+jax.numpy.zeros(1).block_until_ready()
+"""
+
+
+def test_the_option_is_added_once_and_never_over_the_users():
+    env = {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}
+    assert set_cpu_options(env) and not set_cpu_options(env)
+    assert env["XLA_FLAGS"] == "--xla_force_host_platform_device_count=4 --xla_cpu_use_fusion_emitters=false"
+    mine = {"XLA_FLAGS": "--xla_cpu_use_fusion_emitters=true"}
+    assert not set_cpu_options(mine) and mine["XLA_FLAGS"] == "--xla_cpu_use_fusion_emitters=true"
+    empty = {}
+    assert set_cpu_options(empty) and empty["XLA_FLAGS"] == "--xla_cpu_use_fusion_emitters=false"
+
+
+def test_a_jaxlib_that_may_not_know_the_option_is_left_alone(monkeypatch):
+    for version in ("0.4.36", "0.11.0"):
+        monkeypatch.setattr(xla_options.metadata, "version", lambda name, v=version: v)
+        env = {}
+        assert not set_cpu_options(env) and env == {}
+    assert xla_options._release(metadata.version("jaxlib")) >= (0, 5, 3)
+
+
+def test_every_entry_point_sets_it_before_jax_starts():
+    env = {k: v for k, v in __import__("os").environ.items() if k != "XLA_FLAGS"}
+    for module in ("jaxmocap.cli", "jaxmocap.integrate", "train.train"):
+        out = subprocess.run([sys.executable, "-c", SPY, module], capture_output=True, text=True, env=env,
+                             timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        assert "XLA_FLAGS at start: --xla_cpu_use_fusion_emitters=false" in out.stdout, (module, out.stdout)
