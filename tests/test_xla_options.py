@@ -1,5 +1,6 @@
 """XLA's options: the older CPU fusion emitters asked for on import, before JAX starts, never over the user's."""
 
+import os
 import subprocess
 import sys
 from importlib import metadata
@@ -41,7 +42,7 @@ def test_a_jaxlib_that_may_not_know_the_option_is_left_alone(monkeypatch):
 
 
 def test_every_entry_point_sets_it_before_jax_starts():
-    env = {k: v for k, v in __import__("os").environ.items() if k != "XLA_FLAGS"}
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     for module in ("jaxmocap.cli", "jaxmocap.integrate", "train.train"):
         out = subprocess.run([sys.executable, "-c", SPY, module], capture_output=True, text=True, env=env,
                              timeout=300)
