@@ -2,7 +2,7 @@
 
 XLA's newer CPU fusion emitters (its default in recent jaxlib) compile the fit's programs a third slower than its
 older ones and run them no faster (docs/BENCHMARKS.md, "Compile time"), so the older ones are asked for (ResNets,
-the regressors' and the trainer's, run 5-15% slower with them: ``--xla_cpu_use_fusion_emitters=true``). Only for
+the regressors' and the trainer's, run 5-15% slower with the older ones; ``=true`` keeps the default). Only for
 the jaxlib versions known to have the option (XLA stops a process whose ``XLA_FLAGS`` name an option it does not
 know), and never over the user's own choice in ``XLA_FLAGS``.
 """
