@@ -57,9 +57,7 @@ def _levels(parents: tuple[int, ...]) -> _Levels:
         depth[j] = depth[parents[j]] + 1
     groups = [[j for j in range(len(parents)) if depth[j] == d] for d in range(max(depth) + 1)]
     order = [j for group in groups for j in group]
-    place = [0] * len(parents)
-    for i, j in enumerate(order):
-        place[j] = i
+    place = np.argsort(order).tolist()
     starts = np.cumsum([0] + [len(g) for g in groups])
     bounds = tuple((int(a), int(b)) for a, b in zip(starts[:-1], starts[1:]))
     parent_slots = tuple(tuple(place[parents[j]] - starts[d - 1] for j in groups[d]) for d in range(1, len(groups)))
