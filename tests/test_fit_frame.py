@@ -128,13 +128,19 @@ def test_the_solvers_model_has_the_costs_gradient(x64, default_model_dir, focal)
 
 
 def test_jit_equals_eager(x64, default_model_dir):
+    """And the solver's steps alone (``fit_one(differentiable=False)``, as IK, refits, hands and live run them)
+    equal both."""
     model = load64(default_model_dir)
     kp, init = synthetic64(model, seed=4)
     kp = kp.at[5].set(0.0)
     one = functools.partial(fit_frame, model, iterations=5)
     eager, jitted = one(kp, init), jax.jit(one)(kp, init)
-    for a, b in zip(jax.tree.leaves(eager), jax.tree.leaves(jitted)):
-        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+    km, lens = fitting.openpose_keypoint_model(model), fitting.lens_arrays(None, None, jnp.float64)
+    steps = jax.jit(lambda kp, pose, betas: fitting.fit_one(km, kp, pose, betas, None, lens,
+                                                            fitting.FitConfig(iterations=5), differentiable=False))
+    for other in (jitted, steps(kp, init.full_pose(), init.betas)):
+        for a, b in zip(jax.tree.leaves(eager), jax.tree.leaves(other)):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
     assert int(eager.status) == fitting.OK and not bool(eager.converged) and int(eager.steps) == 5  # cut short
     assert float(eager.reprojection_error_px) < 0.5 * float(eager.initial_reprojection_error_px)
 

@@ -86,19 +86,24 @@ def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
 
 
 def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig, free=None,
-            fit_betas=None, adjoint=None) -> FitResult:
+            fit_betas=None, adjoint=None, differentiable: bool = True) -> FitResult:
     """`fit_frame` of one frame from its full pose ``(55, 3)`` with its keypoint model ``km`` made beforehand
     (`openpose_keypoint_model`); ``camera`` (3,) or None (fitted to the start); ``lens`` (`lens_arrays`):
     (1 / focal length, principal point), 1 / focal length 0 for weak perspective; ``free`` (55,) 1 for the joints
-    fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`.
+    fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`;
+    ``differentiable`` False: the same fit without a way for gradients through it (`levenberg_marquardt.run`).
     Matrix products in full float32 on every device: a GPU's default TF32 ends the fit 0.3 px worse (on an H100,
     at the same speed; docs/BENCHMARKS.md)."""
     with jax.default_matmul_precision("highest"):
-        return _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint)
+        return _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint, differentiable)
 
 
-def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint) -> FitResult:
+def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint, differentiable
+             ) -> FitResult:
     problem, start, camera = _problem(km, keypoints, pose, betas, camera, lens, config, free, fit_betas)
+    if not differentiable:
+        y, converged, steps = levenberg_marquardt.run(problem, start, config)
+        return _result(problem, start, camera, y, converged, True, steps)
     solution = levenberg_marquardt.solve(problem, start, config, adjoint)
     converged = solution.result == optx.RESULTS.successful
     solved = converged | (solution.result == optx.RESULTS.nonlinear_max_steps_reached)

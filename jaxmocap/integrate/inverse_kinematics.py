@@ -2,12 +2,12 @@
 
 Targets are metric 3D points in image-aligned axes (x right, y down, z away from the camera): mediapipe's
 BlazePose world landmarks (metres about the hips) and each hand's 21 world landmarks, or any 3D joints. The
-least-squares solver of the 2D fit (`levenberg_marquardt.solve` with D = 3) fits joint rotations together with a free
-scale and offset per target set, so
-the residuals are scale- and offset-free: BlazePose's hip centre is not SMPL-X's pelvis and its skeleton is not
-ours; what is fitted is the shape of the point set, i.e. bone directions. Hands are fitted after the body with
-the body fixed: the wrist's local rotation and the 15 finger joints of that side (the hand's own scale and offset
-free), so the hand's global orientation is pasted under the body's forward kinematics as copy-and-paste does.
+least-squares solver of the 2D fit (`levenberg_marquardt`'s steps with D = 3) fits joint rotations together with a
+free scale and offset per target set, so the residuals are scale- and offset-free: BlazePose's hip centre is not
+SMPL-X's pelvis and its skeleton is not ours; what is fitted is the shape of the point set, i.e. bone directions.
+Hands are fitted after the body with the body fixed: the wrist's local rotation and the 15 finger joints of that
+side (the hand's own scale and offset free), so the hand's global orientation is pasted under the body's forward
+kinematics as copy-and-paste does.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config, prio
     problem = least_squares.Problem(km, targets, conf, centre, betas, prior, jnp.ones((), theta.dtype), free_joints,
                                     fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
     start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))
-    out = levenberg_marquardt.solve(problem, start, config).value
+    out, _, _ = levenberg_marquardt.run(problem, start, config)  # (nothing differentiates IK)
     pose, betas_out = least_squares.pose_and_shape(out, problem)
     cam = jnp.concatenate([jnp.exp(out.camera[:1]), out.camera[1:]])
     ok = (jnp.sum(conf > 0) >= 3) & jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(cam))
@@ -99,7 +99,7 @@ def ik(model: BodyModel, index, targets, conf, theta, betas, free_joints, *, fit
     fit's padded batch sizes (`fitting.BUCKETS`): any number of frames reuses a few compiled solvers."""
     km = keypoint_model(model, index)
     free, fit_shape, config = jnp.asarray(free_joints, jnp.float32), jnp.float32(fit_betas), config or IKConfig()
-    frames = tuple(jnp.asarray(a, jnp.float32) for a in (targets, conf, theta, betas))
+    frames = tuple(np.asarray(a, np.float32) for a in (targets, conf, theta, betas))  # padded in NumPy
     return map_in_buckets(lambda chunk, _: _ik_batch(km, *chunk, free, fit_shape, config), frames, BUCKETS)
 
 

@@ -123,7 +123,7 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
     fit_config = dataclasses.replace(FIT_FROM_IK, iterations=settings.fit_iterations)
     settled = state.shape_seconds >= settings.shape_settle
     fitted = fit_one(models.openpose, keypoints, theta, jnp.where(settled, state.shape, betas), None, lens,
-                     fit_config, fit_betas=jnp.where(settled, 0.0, 1.0))
+                     fit_config, fit_betas=jnp.where(settled, 0.0, 1.0), differentiable=False)
     p = fitted.params
     camera = jnp.concatenate([fitted.camera_scale[None], fitted.camera_trans])[None]
     weight = jnp.where(fresh | settled, 0.0, jnp.minimum(dt, 0.1))  # seconds this frame adds to the shape's mean

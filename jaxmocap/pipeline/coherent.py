@@ -129,7 +129,7 @@ def _refit(km, keypoints, pose, betas, free, lens, config: FitConfig) -> FitResu
     """One frame fitted again from ``pose (55, 3)`` with its shape ``betas`` held, in one compiled call (the
     refits run one after another, each from its neighbour's outcome)."""
     return fit_one(km, keypoints.astype(pose.dtype), pose, betas, None, lens, config, free=free.astype(pose.dtype),
-                   fit_betas=jnp.zeros((), pose.dtype))
+                   fit_betas=jnp.zeros((), pose.dtype), differentiable=False)
 
 
 def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens, config: FitConfig | None,
