@@ -19,6 +19,8 @@ def padded_size(n: int, buckets: tuple[int, ...]) -> int:
 
 def pad_rows(a, size: int):
     """A NumPy or JAX array with its first row repeated to ``size`` rows."""
+    if size == len(a):
+        return a
     xp = jnp if isinstance(a, jax.Array) else np
     return xp.concatenate([a, xp.repeat(a[:1], size - len(a), axis=0)])
 
@@ -31,6 +33,7 @@ def map_in_buckets(fn, tree, buckets: tuple[int, ...]):
     outs = []
     for start in range(0, total, buckets[-1]):
         n = min(buckets[-1], total - start)
-        chunk = jax.tree.map(lambda a: pad_rows(a[start:start + n], bucket_size(n, buckets)), tree)
-        outs.append(jax.tree.map(lambda a: a[:n], fn(chunk, n)))
+        # (slicing or padding a JAX array runs a program: none where the rows are whole)
+        chunk = jax.tree.map(lambda a: pad_rows(a if n == total else a[start:start + n], bucket_size(n, buckets)), tree)
+        outs.append(jax.tree.map(lambda a: a if n == len(a) else a[:n], fn(chunk, n)))
     return outs[0] if len(outs) == 1 else jax.tree.map(lambda *parts: jnp.concatenate(parts), *outs)
