@@ -4,7 +4,7 @@ shape space, and that the PyTorch ``smplx`` package runs on it."""
 import numpy as np
 import pytest
 
-from smplx_jax import constants
+from smplx_jax import constants, default_model
 from smplx_jax.default_model import build_default_model, default_model_path, generator_id, write_default_model
 from smplx_jax.geometry import face_normals, vertex_normals
 
@@ -76,18 +76,17 @@ def test_closed_oriented_manifold(m):
     assert 0.05 < volume < 0.10  # outward normals; an adult is about 65 litres
 
 
-def test_vertex_normals():
+def test_vertex_normals(m):
     """A regular tetrahedron's vertex normals point from its centre through the vertices; an unused vertex's is 0.
     On the model, the normals (that the generator and the glTF export share) are unit and point outwards."""
     v = np.array([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1], [5, 5, 5]])
     f = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
     np.testing.assert_allclose(np.linalg.norm(face_normals(v, f), axis=1), 2 * np.sqrt(3) * 4 / 2)  # 2 x area
     np.testing.assert_allclose(vertex_normals(v, f), np.vstack([v[:4] / np.sqrt(3), np.zeros(3)]), atol=1e-12)
-    model = build_default_model()
-    normals = vertex_normals(model["v_template"], model["f"])
+    normals = vertex_normals(m["v_template"], m["f"])
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-6)  # eye corners: ~1e-6 m² around
-    along = np.einsum("fi,fi->f", face_normals(model["v_template"], model["f"]), normals[model["f"]].sum(axis=1))
-    assert np.mean(along > 0) > 0.99 and normals[np.argmax(model["v_template"][:, 1]), 1] > 0.9  # crown: up
+    along = np.einsum("fi,fi->f", face_normals(m["v_template"], m["f"]), normals[m["f"]].sum(axis=1))
+    assert np.mean(along > 0) > 0.99 and normals[np.argmax(m["v_template"][:, 1]), 1] > 0.9  # crown: up
     assert generator_id().startswith("v1-")  # hashes geometry.py too
 
 
@@ -234,6 +233,7 @@ def test_landmarks_on_face(m):
 def test_deterministic_and_cached(m, tmp_path, monkeypatch):
     again = build_default_model()
     assert all(np.array_equal(m[k], again[k]) for k in m)
+    monkeypatch.setattr(default_model, "build_default_model", lambda: again)  # built and checked: not again
     monkeypatch.setenv("JAXMOCAP_CACHE", str(tmp_path))
     path = default_model_path()
     assert path.name == "SMPLX_NEUTRAL.npz" and path.parent.name == "smplx" and tmp_path in path.parents
@@ -248,8 +248,6 @@ def test_generator_id_covers_every_file(tmp_path, monkeypatch):
     """The cache key hashes every file of ``smplx_jax/_default`` (no hand list): editing, adding or renaming any
     file, data included, changes it; byte-code caches do not."""
     import shutil
-
-    from smplx_jax import default_model
 
     copy = tmp_path / "_default"
     shutil.copytree(default_model._GENERATOR_DIR, copy, ignore=shutil.ignore_patterns("__pycache__"))
