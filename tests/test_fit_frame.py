@@ -128,8 +128,8 @@ def test_the_solvers_model_has_the_costs_gradient(x64, default_model_dir, focal)
 
 
 def test_jit_equals_eager(x64, default_model_dir):
-    """And the solver's steps alone (``fit_one(differentiable=False)``, as IK, refits, hands and live run them)
-    equal both."""
+    """The jitted fit equals the eager one, and so do the solver's steps alone (``fit_one(differentiable=False)``,
+    as IK, the refits, the hands and live run them)."""
     model = load64(default_model_dir)
     kp, init = synthetic64(model, seed=4)
     kp = kp.at[5].set(0.0)
