@@ -29,14 +29,13 @@ THUMB = (68, 120)  # width, height of a thumbnail of the side view (the overlay'
 
 def side_strip(overlay: Path, label: str) -> np.ndarray:
     """Every `EVERY`-th frame's side view, numbered, after a label."""
-    capture = cv2.VideoCapture(str(overlay))
-    thumbs, index = [], 0
-    while (frame := capture.read()[1]) is not None:
-        if index % EVERY == 0:
-            thumb = cv2.resize(frame[:, frame.shape[1] // 2:], THUMB, interpolation=cv2.INTER_AREA)
-            cv2.putText(thumb, str(index), (2, 11), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 200), 1)
-            thumbs.append(thumb)
-        index += 1
+    from jaxmocap.frame_source import open_media
+
+    thumbs = []
+    for index, frame in open_media(overlay, stride=EVERY)[1]:
+        thumb = cv2.resize(frame[:, frame.shape[1] // 2:], THUMB, interpolation=cv2.INTER_AREA)
+        cv2.putText(thumb, str(index), (2, 11), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 200), 1)
+        thumbs.append(thumb)
     name = np.full((THUMB[1], 110, 3), 255, np.uint8)
     cv2.putText(name, label, (4, THUMB[1] // 2), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
     return np.hstack([name, *thumbs])
