@@ -152,15 +152,16 @@ def frankmocap_run(frankmocap, tmp_path_factory):
 
     done = {}
 
+    start, end = WEIGHTS_RUN_FRAMES
+    defaults = dict(weights=frankmocap[0] / "weights", start=start, end=end, chunk_size=4, smooth=False,
+                    overlay=False, progress=False, frankmocap_pkl=True)
+
     def weights_run(**options) -> Path:
-        key = tuple(sorted(options.items()))
-        if key not in done:
-            done[key] = tmp_path_factory.mktemp("frankmocap_run")
-            start, end = WEIGHTS_RUN_FRAMES
-            defaults = dict(weights=frankmocap[0] / "weights", start=start, end=end, chunk_size=4, smooth=False,
-                            overlay=False, progress=False, frankmocap_pkl=True)
-            run(RunConfig(CLIP, **defaults | options), done[key])
-        return done[key]
+        config = RunConfig(CLIP, **defaults | options)  # options equal to the defaults give the same run
+        if config not in done:
+            done[config] = tmp_path_factory.mktemp("frankmocap_run")
+            run(config, done[config])
+        return done[config]
 
     return weights_run
 

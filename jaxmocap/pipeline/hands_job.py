@@ -223,8 +223,10 @@ def side_arrays(table: dict[str, np.ndarray], frames: int, hand_models: dict, sm
 
 @jax.jit
 def _smooth_side(global_orient, hand_pose, camera_scale, camera_trans, valid):
-    return {"global_orient": smooth_rotvecs(global_orient, valid), "hand_pose": smooth_rotvecs(hand_pose, valid),
-            "camera_scale": smooth_linear(camera_scale, valid), "camera_trans": smooth_linear(camera_trans, valid)}
+    rotations = smooth_rotvecs(jnp.concatenate([global_orient[:, None], hand_pose], 1), valid)  # one conversion
+    camera = smooth_linear(jnp.concatenate([camera_scale[:, None], camera_trans], 1), valid)
+    return {"global_orient": rotations[:, 0], "hand_pose": rotations[:, 1:], "camera_scale": camera[:, 0],
+            "camera_trans": camera[:, 1:]}
 
 
 def smoothed_side(arrays: dict[str, np.ndarray], hand: smplx_jax.HandModel) -> dict[str, np.ndarray]:

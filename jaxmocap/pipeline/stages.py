@@ -93,7 +93,11 @@ def one_shape(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarr
     return frames_where(use, refitted, dataclasses.replace(bodies, params=params))
 
 
-_SMOOTH = jax.jit(smooth_params)
+@jax.jit
+def _smooth(params, scale, trans, valid):
+    return smooth_params(params, valid), *smooth_camera(scale, trans, valid)
+
+
 SMOOTHING_SLACK = (3.0, 20.0)  # (times, pixels): how much farther a smoothed body may reproject than its fit
 
 
@@ -106,10 +110,9 @@ def smoothed(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
     `SMOOTHING_SLACK` farther from the 2D keypoints than the frame's own fit, the frame keeps its fit."""
     if not bodies.valid.any():
         return bodies
-    valid = jnp.asarray(bodies.valid)
-    scale, trans = smooth_camera(jnp.asarray(bodies.camera_scale), jnp.asarray(bodies.camera_trans), valid)
-    smooth = Bodies(jax.tree.map(np.asarray, _SMOOTH(bodies.params, valid)), np.asarray(scale), np.asarray(trans),
-                    bodies.valid)
+    params, scale, trans = jax.tree.map(np.asarray, _smooth(bodies.params, bodies.camera_scale, bodies.camera_trans,
+                                                            bodies.valid))
+    smooth = Bodies(params, scale, trans, bodies.valid)
     fitted, filtered = (reprojection_errors(model, b.params, b.camera_scale, b.camera_trans, keypoints_2d, *lens)
                         for b in (bodies, smooth))
     ratio, pixels = SMOOTHING_SLACK
