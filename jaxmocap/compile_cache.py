@@ -4,7 +4,8 @@ of ``jaxmocap batch``): a program compiled once, by any of them, is read back by
 
 def use_compilation_cache() -> None:
     """Keep XLA's compiled programs on disk (``$JAXMOCAP_CACHE/xla``, at most 1 GiB, least recently used out), so
-    that a second run skips most compilation (docs/BENCHMARKS.md, "End to end"). ``JAX_COMPILATION_CACHE_DIR``
+    that a second run skips the compilation (docs/BENCHMARKS.md, "End to end"): every program, the small ones too
+    (a run's ~140 programs under 0.5 s took 3-4 s to compile again in each run). ``JAX_COMPILATION_CACHE_DIR``
     takes precedence."""
     import jax
 
@@ -12,5 +13,5 @@ def use_compilation_cache() -> None:
 
     if jax.config.jax_compilation_cache_dir is None:
         jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_compilation_cache_max_size", 1 << 30)

@@ -68,8 +68,7 @@ import jax, jax.numpy as jnp
 from jaxmocap.cli import use_compilation_cache
 events = []
 jax.monitoring.register_event_listener(lambda name, **kwargs: events.append(name))
-use_compilation_cache()
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)  # cache even this tiny program
+use_compilation_cache()  # keeps even this tiny program
 jax.jit(lambda x: jnp.sin(x) * 2)(1.0)
 print("hit" if "/jax/compilation_cache/cache_hits" in events else "miss")
 """
