@@ -150,11 +150,10 @@ def frankmocap_run(frankmocap, tmp_path_factory):
     options (``integration``, ``mode``, ``hand_boxes``, ``end``)."""
     from jaxmocap.pipeline import RunConfig, run
 
-    done = {}
-
     start, end = WEIGHTS_RUN_FRAMES
     defaults = dict(weights=frankmocap[0] / "weights", start=start, end=end, chunk_size=4, smooth=False,
                     overlay=False, progress=False, frankmocap_pkl=True)
+    done = {}
 
     def weights_run(**options) -> Path:
         config = RunConfig(CLIP, **defaults | options)  # options equal to the defaults give the same run

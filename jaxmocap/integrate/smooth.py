@@ -67,7 +67,7 @@ def smooth_rotvecs(rotvecs: Float[Array, "T ... 3"], valid: Bool[Array, "T"], ke
 def smooth_params(params: SMPLXParams, valid: Bool[Array, "T"], kernel=KERNEL) -> SMPLXParams:
     """Every rotation of a batch of bodies (T leading) smoothed as rotations; shape, expression, ``transl``
     linearly. The 55 joints' rotations go through one conversion to quaternions and back, the rest through one
-    average: the same values as smoothing each field alone, compiled in a quarter of the time."""
+    average: the values of smoothing each field alone (to float32 rounding), compiled in a quarter of the time."""
     p = smooth_rotvecs(jax.vmap(SMPLXParams.full_pose)(params), valid, kernel)  # (T, 55, 3), SMPL-X order
     sizes = np.cumsum([params.betas.shape[-1], params.expression.shape[-1]])
     betas, expression, transl = jnp.split(smooth_linear(
