@@ -143,6 +143,9 @@ def test_jit_equals_eager(x64, default_model_dir):
             np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
     assert int(eager.status) == fitting.OK and not bool(eager.converged) and int(eager.steps) == 5  # cut short
     assert float(eager.reprojection_error_px) < 0.5 * float(eager.initial_reprojection_error_px)
+    with pytest.raises(ValueError, match="adjoint is for a differentiable fit"):  # it would be ignored
+        fitting.fit_one(km, kp, init.full_pose(), init.betas, None, lens, fitting.FitConfig(iterations=5),
+                        adjoint=optx.RecursiveCheckpointAdjoint(), differentiable=False)
 
 
 def test_a_solve_stalled_at_its_damping_cap_restarts_once_then_stops_unconverged(x64, default_model_dir):

@@ -94,6 +94,8 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
     ``differentiable`` False: the same fit without a way for gradients through it (`levenberg_marquardt.run`).
     Matrix products in full float32 on every device: a GPU's default TF32 ends the fit 0.3 px worse (on an H100,
     at the same speed; docs/BENCHMARKS.md)."""
+    if adjoint is not None and not differentiable:
+        raise ValueError("adjoint is for a differentiable fit: fit_one(differentiable=False) takes none")
     with jax.default_matmul_precision("highest"):
         return _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint, differentiable)
 
