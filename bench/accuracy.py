@@ -109,7 +109,8 @@ def rotation_coherence(motion: dict) -> dict:
     changes = rotation_changes_deg(motion["global_orient"], motion["body_pose"], motion["valid"])
     return dict(rotation_change_median_deg=float(np.median(changes)),
                 rotation_change_over_45deg=float(np.mean(changes > 45)),
-                global_turn_over_45deg=float(np.mean(changes[:, 0] > 45)))
+                global_turn_over_45deg=float(np.mean(changes[:, 0] > 45)),
+                global_turn_largest_deg=float(changes[:, 0].max(initial=0.0)))
 
 
 VARIANTS = ("mirror", "rotate90", "crop", "half", "30fps")
