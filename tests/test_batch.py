@@ -235,10 +235,12 @@ def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, r
 def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
     """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video listed as stopped in batch.json, its
     stored chunks kept for the next call, nothing half-written, and the local Ray (which listened on 127.0.0.1
-    alone) gone."""
+    alone) gone. Frames 20-60 (ten chunks of the same shapes), so that the video is still running when the signal
+    comes (with 8 frames it could end first on a busy machine)."""
     env, _ = ray_env
     out = tmp_path / "out"
-    batch = subprocess.Popen(jaxmocap("batch", str(CLIP), "--out", str(out), "--workers", "1", *OPTIONS),
+    options = [*OPTIONS[:3], "60", *OPTIONS[4:]]
+    batch = subprocess.Popen(jaxmocap("batch", str(CLIP), "--out", str(out), "--workers", "1", *options),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         wait_for(lambda: (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists(), 300, "the video to start")
