@@ -19,6 +19,10 @@ SEARCH_SECONDS = 0.2  # while fewer than max_people are tracked, the person dete
 BONES = np.array([(11, 13), (13, 15), (12, 14), (14, 16), (11, 12), (23, 24), (11, 23), (12, 24), (23, 25),
                   (25, 27), (24, 26), (26, 28), (0, 11), (0, 12)])  # BlazePose landmarks: arms, torso, legs, head
 CONFIRM_FRAMES = 2  # a person found beside others is reported once tracked in this many frames
+# a person detection on which the landmark model's presence is below min_tracking_confidence but at least this
+# (someone cut by the frame's edge: 0.14-0.36 on the two-person take's cropped view) is searched for again in
+# each frame until the next search: the presence on a new detection's crop swings from frame to frame there
+DOUBTFUL_PRESENCE = 0.1
 
 
 def search_interval(fps: float | None) -> int:
@@ -111,12 +115,14 @@ class Detector:
         self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
                                     paths["hand_recrop.tflite"], num_threads) if hands else None
         self._tracks: list[_Track] = []
+        self._searches_left = 0  # frames left in a burst of searches (`_people`)
         self._frame = 0
         self._started = 0  # tracks started
 
     def reset(self) -> None:
         """Forget the tracked people (start of a new video)."""
         self._tracks = []
+        self._searches_left = 0
         self._frame = 0
         self._started = 0
 
@@ -128,7 +134,8 @@ class Detector:
                "seen": np.asarray([t.seen for t in self._tracks], np.int64),
                "number": np.asarray([t.number for t in self._tracks], np.int64),
                "hand_found": np.asarray(
-            [[h is not None for h in pair] for pair in hands], bool).reshape(-1, 2)}
+            [[h is not None for h in pair] for pair in hands], bool).reshape(-1, 2),
+               "searches_left": np.asarray(self._searches_left)}
         for kind, results, empty in (("pose", [t.pose for t in self._tracks], None),
                                      ("hand", [h for pair in hands for h in pair], _NO_HAND)):
             for name in (PoseResult if kind == "pose" else HandResult)._fields:
@@ -147,6 +154,7 @@ class Detector:
         self._tracks = [_Track(result("pose", PoseResult, k), {
             side: result("hand", HandResult, 2 * k + j) if found[k, j] else None for j, side in enumerate(SIDES)},
             int(state["seen"][k]), int(state["number"][k])) for k in range(len(found))]
+        self._searches_left = int(state["searches_left"])
         self._frame, self._started = int(state["frame"]), int(state["started"])
 
     # -- body -------------------------------------------------------------------------------------------------
@@ -164,9 +172,11 @@ class Detector:
         whole = self._pose.detect(image, self.min_detection_confidence)
         return sorted(whole, key=lambda d: -d.score) + sorted(tiles, key=lambda d: -d.score)
 
-    def _detect_people(self, image: np.ndarray, known: list[PoseResult]) -> list[PoseResult]:
+    def _detect_people(self, image: np.ndarray, known: list[PoseResult]) -> tuple[list[PoseResult], bool]:
+        """The people the person detector finds beside the ``known`` ones, and whether it found someone the
+        landmark model was unsure of (`DOUBTFUL_PRESENCE`)."""
         size = (image.shape[1], image.shape[0])
-        found = list(known)
+        found, unsure = list(known), False
         for det in self._person_detections(image):
             if len(found) >= self.max_people:
                 break
@@ -174,28 +184,36 @@ class Detector:
             if any(rect_iou(roi, p.roi) > 0.5 or rect_iou(roi, p.next_roi) > 0.5 or _at_hips(det, p, size)
                    for p in found):
                 continue
-            result = self._pose.landmarks(image, roi, self.min_tracking_confidence)
-            if result is not None and not any(_same_person(result, p, size) for p in found):
+            result = self._pose.landmarks(image, roi, 0.0)
+            if result.presence < self.min_tracking_confidence:
+                unsure |= result.presence >= DOUBTFUL_PRESENCE
+            elif not any(_same_person(result, p, size) for p in found):
                 found.append(result)
-        return found[len(known):]
+        return found[len(known):], unsure
 
     def _people(self, image: np.ndarray) -> list[_Track]:
         size = (image.shape[1], image.shape[0])
         if self.static_image_mode:
-            return [_Track(p, {s: None for s in SIDES}) for p in self._detect_people(image, [])]
+            return [_Track(p, {s: None for s in SIDES}) for p in self._detect_people(image, [])[0]]
         tracks = []
         for track in self._tracks:
             result = self._pose.landmarks(image, track.pose.next_roi, self.min_tracking_confidence)
             if result is None or any(_coincide(result, t.pose, size) for t in tracks):
                 continue
             tracks.append(_Track(result, track.hands, track.seen + 1, track.number))
-        if not tracks or (len(tracks) < self.max_people and self._frame % self.redetect_every == 0):
-            new = self._detect_people(image, [t.pose for t in tracks])
-            # the first person of a stream is reported at once; anyone found beside others once tracked in
-            # `CONFIRM_FRAMES` frames (a detection that does not survive them is a false one, often a part of someone)
-            tracks += [_Track(p, {s: None for s in SIDES}, CONFIRM_FRAMES if not tracks and k == 0 else 1,
-                              self._started + k) for k, p in enumerate(new)]
-            self._started += len(new)
+        new, lost = [], len(tracks) < len(self._tracks)
+        if not tracks or (len(tracks) < self.max_people
+                          and (self._frame % self.redetect_every == 0 or lost or self._searches_left)):
+            new, unsure = self._detect_people(image, [t.pose for t in tracks])
+            # someone lost, or someone the landmark model was unsure of: searched for in each frame for the
+            # next search interval (a burst, not restarted while it lasts)
+            self._searches_left = (self.redetect_every - 1 if (lost or unsure) and not self._searches_left
+                                   else max(self._searches_left - 1, 0))
+        # the first person of a stream is reported at once; anyone found beside others once tracked in
+        # `CONFIRM_FRAMES` frames (a detection that does not survive them is a false one, often a part of someone)
+        tracks += [_Track(p, {s: None for s in SIDES}, CONFIRM_FRAMES if not tracks and k == 0 else 1,
+                          self._started + k) for k, p in enumerate(new)]
+        self._started += len(new)
         return tracks
 
     # -- hands ------------------------------------------------------------------------------------------------

@@ -49,7 +49,7 @@ from jaxmocap.pipeline.stages import (
 )
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
-SETTINGS_VERSION = 6  # of the stored chunks: bump when what a chunk holds changes
+SETTINGS_VERSION = 7  # of the stored chunks: bump when what a chunk holds changes
 
 
 @dataclass(frozen=True)
