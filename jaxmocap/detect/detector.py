@@ -20,8 +20,8 @@ BONES = np.array([(11, 13), (13, 15), (12, 14), (14, 16), (11, 12), (23, 24), (1
                   (25, 27), (24, 26), (26, 28), (0, 11), (0, 12)])  # BlazePose landmarks: arms, torso, legs, head
 CONFIRM_FRAMES = 2  # a person found beside others is reported once tracked in this many frames
 # a person detection on which the landmark model's presence is below min_tracking_confidence but at least this
-# (someone cut by the frame's edge: 0.14-0.36 on the two-person take's cropped view) is searched for again in
-# each frame until the next search: the presence on a new detection's crop swings from frame to frame there
+# (someone cut by the frame's edge: 0.03-0.9 on the two-person take's cropped view, swinging from frame to frame)
+# starts a burst of searches, as a lost track does (`Detector`)
 DOUBTFUL_PRESENCE = 0.1
 
 
@@ -91,8 +91,9 @@ class Detector:
 
     ``static_image_mode=True`` treats every call as an unrelated image (person and palm detectors each time);
     ``False`` tracks: the next ROIs come from the previous frame's landmarks, the person detector runs only when
-    a track is lost (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked; for a video,
-    `search_interval` of its frame rate, so that someone who comes in is found within a quarter second), and each
+    no one is tracked (or every ``redetect_every`` frames while fewer than ``max_people`` are tracked; for a video,
+    `search_interval` of its frame rate, so that someone who comes in is found within a quarter second; and in each
+    frame for as long after a track is lost, or a detection the landmark model is unsure of), and each
     hand comes, as in mediapipe's holistic, from the ROI that the body's wrist, pinky and index give, refined by
     the recrop model, or from the previous frame's hand while that stays close to it. ``hands=False``: bodies
     alone, the hand models not even loaded.
