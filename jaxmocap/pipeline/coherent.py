@@ -12,6 +12,8 @@ with that hand's fingers free, it is taken within `WRIST_TIE_PX` (those refits o
 half scale from 60.5 to 57.6, each other variant of cam01 and cam03 within 0.1 mm). A frame that keeps its fit
 takes the twists of its turned bones from the neighbour (`untwisted`): a twist handed between a joint and its
 child (a thigh turned one way about itself and the shin back) moves no keypoint, so the image cannot choose it.
+Before all this, in every frame, the neck and the collars hand their twists on to the head and the shoulders
+(`girdle_untwisted`): ball joints both, so the pose is the one the keypoints and the children's orientations give.
 """
 
 import dataclasses
@@ -37,6 +39,7 @@ WRISTS = (20, 21)  # SMPL-X joints
 # collars to wrists (the pelvis, the top of the spine, the wrists have several children; the feet and head none)
 BONES = ((1, 4), (2, 5), (3, 6), (4, 7), (5, 8), (6, 9), (7, 10), (8, 11), (12, 15), (13, 16), (14, 17), (16, 18),
          (17, 19), (18, 20), (19, 21))
+GIRDLE = ((12, 15), (13, 16), (14, 17))  # the neck and head, the collars and shoulders: ball joints both
 
 
 def rodrigues(rotvecs: np.ndarray) -> np.ndarray:
@@ -95,6 +98,28 @@ def untwisted(rotmats: np.ndarray, neighbour: np.ndarray, bone_axes: np.ndarray,
         if turns_deg((out[joint] @ twist)[None], neighbour[joint][None])[0] <= TURN_DEG:
             out[joint], out[child] = out[joint] @ twist, twist.T @ out[child]
     return out
+
+
+def girdle_untwisted(model: smplx_jax.BodyModel, bodies: Bodies) -> Bodies:
+    """``bodies`` with the twist of the neck and of each collar about its bone (`GIRDLE`) handed to its child (the
+    head, the shoulder) in every valid frame, as `untwisted` hands a twist on: every joint's position and every
+    child's orientation stay, so no keypoint moves, and a fit leaves that twist to chance (the two-person take's
+    woman at 30 frames/s: neck, collars and their children turned 125-165° one way and back from one frame to the
+    next). With none there, the pose that the keypoints and the children's orientations give is one."""
+    valid = np.flatnonzero(bodies.valid)
+    if not len(valid):
+        return bodies
+    axes = bone_axes(model, np.asarray(bodies.params.betas[valid[0]], np.float64))
+    rotmats = body_rotmats(bodies.params.global_orient[valid], bodies.params.body_pose[valid])
+    for frame in rotmats:
+        for joint, child in GIRDLE:
+            twist = rodrigues(axes[joint] * _twist_angle(frame[joint], axes[joint]))
+            frame[joint], frame[child] = frame[joint] @ twist.T, twist @ frame[child]
+    rotvecs = np.asarray(rotmat_to_rotvec(rotmats.astype(np.float32)))
+    params = bodies.params
+    global_orient, body_pose = np.array(params.global_orient), np.array(params.body_pose)
+    global_orient[valid], body_pose[valid] = rotvecs[:, 0], rotvecs[:, 1:]
+    return dataclasses.replace(bodies, params=params.replace(global_orient=global_orient, body_pose=body_pose))
 
 
 def bone_axes(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:

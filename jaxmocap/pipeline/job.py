@@ -27,7 +27,7 @@ from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
-from jaxmocap.pipeline.coherent import coherent
+from jaxmocap.pipeline.coherent import coherent, girdle_untwisted
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
@@ -98,7 +98,8 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         refit = shape_fit(config, inputs)
 
         def person_bodies(track):
-            bodies = one_shape(inputs.model, track.bodies, track.keypoints_2d, inputs.lens, *refit)
+            bodies = girdle_untwisted(inputs.model, one_shape(inputs.model, track.bodies, track.keypoints_2d,
+                                                              inputs.lens, *refit))
             return coherent(inputs.model, bodies, track.keypoints_2d, inputs.lens, *refit) if video else bodies
 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
