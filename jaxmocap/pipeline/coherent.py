@@ -12,8 +12,9 @@ with that hand's fingers free, it is taken within `WRIST_TIE_PX` (those refits o
 half scale from 60.5 to 57.6, each other variant of cam01 and cam03 within 0.1 mm). A frame that keeps its fit
 takes the twists of its turned bones from the neighbour (`untwisted`): a twist handed between a joint and its
 child (a thigh turned one way about itself and the shin back) moves no keypoint, so the image cannot choose it.
-Before all this, in every frame, the neck and the collars hand their twists on to the head and the shoulders
-(`girdle_untwisted`): ball joints both, so the pose is the one the keypoints and the children's orientations give.
+Before all this, in every frame of a fitted run, the neck and the collars hand their twists on to the head and the
+shoulders (`girdle_untwisted`): ball joints both, so the pose is the one the keypoints and the children's
+orientations give.
 """
 
 import dataclasses

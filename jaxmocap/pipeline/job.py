@@ -98,8 +98,10 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         refit = shape_fit(config, inputs)
 
         def person_bodies(track):
-            bodies = girdle_untwisted(inputs.model, one_shape(inputs.model, track.bodies, track.keypoints_2d,
-                                                              inputs.lens, *refit))
+            bodies = one_shape(inputs.model, track.bodies, track.keypoints_2d, inputs.lens, *refit)
+            if refit[0] is None:  # the regressors' output as it is (copy-and-paste, EFT alone)
+                return bodies
+            bodies = girdle_untwisted(inputs.model, bodies)
             return coherent(inputs.model, bodies, track.keypoints_2d, inputs.lens, *refit) if video else bodies
 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
