@@ -105,8 +105,8 @@ def girdle_untwisted(model: smplx_jax.BodyModel, bodies: Bodies) -> Bodies:
     """``bodies`` with the twist of the neck and of each collar about its bone (`GIRDLE`) handed to its child (the
     head, the shoulder) in every valid frame, as `untwisted` hands a twist on: every joint's position and every
     child's orientation stay, so no keypoint moves, and a fit leaves that twist to chance (the two-person take's
-    woman at 30 frames/s: neck, collars and their children turned 125-165° one way and back from one frame to the
-    next). With none there, the pose that the keypoints and the children's orientations give is one."""
+    woman at 30 frames/s: neck, collars and their children turned by 125-165° from one frame to the next). With
+    none there, the pose that the keypoints and the children's orientations give is one."""
     valid = np.flatnonzero(bodies.valid)
     if not len(valid):
         return bodies
@@ -116,11 +116,7 @@ def girdle_untwisted(model: smplx_jax.BodyModel, bodies: Bodies) -> Bodies:
         for joint, child in GIRDLE:
             twist = rodrigues(axes[joint] * _twist_angle(frame[joint], axes[joint]))
             frame[joint], frame[child] = frame[joint] @ twist.T, twist @ frame[child]
-    rotvecs = np.asarray(rotmat_to_rotvec(rotmats.astype(np.float32)))
-    params = bodies.params
-    global_orient, body_pose = np.array(params.global_orient), np.array(params.body_pose)
-    global_orient[valid], body_pose[valid] = rotvecs[:, 0], rotvecs[:, 1:]
-    return dataclasses.replace(bodies, params=params.replace(global_orient=global_orient, body_pose=body_pose))
+    return _with_body_rotations(bodies, valid, rotmats)
 
 
 def bone_axes(model: smplx_jax.BodyModel, betas: np.ndarray) -> np.ndarray:
@@ -199,10 +195,11 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
     return out
 
 
-def _with_body_rotations(bodies: Bodies, k: int, rotmats: np.ndarray) -> Bodies:
-    """``bodies`` with frame ``k``'s global orientation and body pose those of ``rotmats (22, 3, 3)``."""
+def _with_body_rotations(bodies: Bodies, frames: int | np.ndarray, rotmats: np.ndarray) -> Bodies:
+    """``bodies`` with the global orientation and body pose of ``frames`` (a frame, or an index array) those of
+    ``rotmats`` (``(22, 3, 3)``, or one such per frame)."""
     rotvecs = np.asarray(rotmat_to_rotvec(np.asarray(rotmats, np.float32)))
     params = bodies.params
     global_orient, body_pose = np.array(params.global_orient), np.array(params.body_pose)
-    global_orient[k], body_pose[k] = rotvecs[0], rotvecs[1:]
+    global_orient[frames], body_pose[frames] = rotvecs[..., 0, :], rotvecs[..., 1:, :]
     return dataclasses.replace(bodies, params=params.replace(global_orient=global_orient, body_pose=body_pose))
