@@ -95,10 +95,18 @@ def untwisted(rotmats: np.ndarray, neighbour: np.ndarray, bone_axes: np.ndarray,
     for joint, child in BONES:
         if not turned[joint]:
             continue
-        twist = rodrigues(bone_axes[joint] * _twist_angle(out[joint].T @ neighbour[joint], bone_axes[joint]))
-        if turns_deg((out[joint] @ twist)[None], neighbour[joint][None])[0] <= TURN_DEG:
-            out[joint], out[child] = out[joint] @ twist, twist.T @ out[child]
+        angle = _twist_angle(out[joint].T @ neighbour[joint], bone_axes[joint])
+        handed = _twist_handed_on(out[joint], out[child], bone_axes[joint], angle)
+        if turns_deg(handed[0][None], neighbour[joint][None])[0] <= TURN_DEG:
+            out[joint], out[child] = handed
     return out
+
+
+def _twist_handed_on(joint: np.ndarray, child: np.ndarray, axis: np.ndarray, angle: float):
+    """A joint's rotation ``(3, 3)`` twisted by ``angle`` about its bone's unit ``axis``, and its child's turned
+    back by as much: the child's orientation and every joint's position stay, so no keypoint moves."""
+    twist = rodrigues(axis * angle)
+    return joint @ twist, twist.T @ child
 
 
 def girdle_untwisted(model: smplx_jax.BodyModel, bodies: Bodies) -> Bodies:
@@ -114,8 +122,8 @@ def girdle_untwisted(model: smplx_jax.BodyModel, bodies: Bodies) -> Bodies:
     rotmats = body_rotmats(bodies.params.global_orient[valid], bodies.params.body_pose[valid])
     for frame in rotmats:
         for joint, child in GIRDLE:
-            twist = rodrigues(axes[joint] * _twist_angle(frame[joint], axes[joint]))
-            frame[joint], frame[child] = frame[joint] @ twist.T, twist @ frame[child]
+            frame[joint], frame[child] = _twist_handed_on(frame[joint], frame[child], axes[joint],
+                                                          -_twist_angle(frame[joint], axes[joint]))
     return _with_body_rotations(bodies, valid, rotmats)
 
 
