@@ -23,6 +23,7 @@ import numpy as np
 import psutil
 import pytest
 
+from conftest import cli_as_from_a_terminal
 from jaxmocap.batch import BatchConfig
 from jaxmocap.batch.ledger import STOPPED
 from jaxmocap.batch.videos import folder_names, read_manifest
@@ -236,11 +237,12 @@ def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
     """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video listed as stopped in batch.json, its
     stored chunks kept for the next call, nothing half-written, and the local Ray (which listened on 127.0.0.1
     alone) gone. Frames 20-60 (ten chunks of the same shapes), so that the video is still running when the signal
-    comes (with 8 frames it could end first on a busy machine)."""
+    comes. Started as from a terminal (`conftest.cli_as_from_a_terminal`): in a suite run as a background job the
+    batch otherwise ignored the signal and finished the video (exit 0)."""
     env, _ = ray_env
     out = tmp_path / "out"
     options = [*OPTIONS[:3], "60", *OPTIONS[4:]]
-    batch = subprocess.Popen(jaxmocap("batch", str(CLIP), "--out", str(out), "--workers", "1", *options),
+    batch = subprocess.Popen(cli_as_from_a_terminal("batch", str(CLIP), "--out", str(out), "--workers", "1", *options),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         wait_for(lambda: (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists(), 300, "the video to start")
@@ -251,7 +253,7 @@ def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
         stdout, stderr = batch.communicate(timeout=180)
     finally:
         batch.kill()
-    assert batch.returncode == 130, stderr
+    assert batch.returncode == 130, (stdout, stderr)
     assert stderr.strip().splitlines()[-1] == "jaxmocap batch: interrupted; run the same command again to resume"
     assert "Traceback" not in stderr
     assert not temporary_files(out) and not (out / CLIP.stem / "motion.npz").exists()

@@ -21,7 +21,7 @@ import pytest
 
 import smplx_jax
 from bench import live as live_bench
-from conftest import assert_one_body
+from conftest import assert_one_body, cli_as_from_a_terminal
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import MediaError
 from jaxmocap.live import LiveConfig, live, params_from_message
@@ -276,11 +276,8 @@ def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
 
 # -- the command ------------------------------------------------------------------------------------------------------
 def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp_path):
-    # Ctrl-C as from a terminal: a background job (CI's, nohup's) inherits SIGINT ignored, and Python leaves it so
-    as_from_a_terminal = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-                          "from jaxmocap.cli import main; sys.exit(main(sys.argv[1:]))")
-    command = [sys.executable, "-X", "faulthandler", "-c", as_from_a_terminal, "live", str(CLIP), "--realtime",
-               "--loop", "0", "--serve", "0", "--record", str(tmp_path), "--quiet"]
+    command = cli_as_from_a_terminal("live", str(CLIP), "--realtime", "--loop", "0", "--serve", "0", "--record",
+                                     str(tmp_path), "--quiet", python_options=("-X", "faulthandler"))
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = ""
