@@ -3,6 +3,10 @@
 The computation is the ``smplx`` package's: shape blend shapes, joints regressed from the shaped mesh
 (precomputed as joint templates plus joint shape directions), pose blend shapes, a rigid kinematic chain and
 linear blend skinning; then vertex joints and face landmarks, and ``transl`` last. Batch with ``jax.vmap``.
+
+The three public functions are jitted: called eagerly, each runs one program compiled once per shape (a batch of 8
+bodies: 0.7 s to compile, then 3 ms), not its hundred operations one by one (1.9 s the first time, 20 ms after).
+Inside a caller's ``jit``, ``vmap`` or ``grad`` they are traced as any function is.
 """
 
 import functools
@@ -134,6 +138,7 @@ def _joints(model, shape, rel_rotmats, transforms, positions, transl):
     return jnp.concatenate([positions, vertex_joints.T, landmarks.T]) + transl
 
 
+@jax.jit
 def forward(model: BodyModel, params: SMPLXParams) -> Output:
     """Vertices (V, 3) and the 127 joints of one body, as ``smplx.SMPLX`` computes them."""
     shape, rel_rotmats, rest_joints, glob_rotmats, positions = _posed_skeleton(model, params)
@@ -147,6 +152,7 @@ def forward(model: BodyModel, params: SMPLXParams) -> Output:
     return Output(vertices, _joints(model, shape, rel_rotmats, transforms, positions, params.transl))
 
 
+@jax.jit
 def forward_joints(model: BodyModel, params: SMPLXParams) -> Float[Array, "127 3"]:
     """The 127 joints of `forward` without forming the mesh."""
     shape, rel_rotmats, rest_joints, glob_rotmats, positions = _posed_skeleton(model, params)
@@ -154,6 +160,7 @@ def forward_joints(model: BodyModel, params: SMPLXParams) -> Float[Array, "127 3
     return _joints(model, shape, rel_rotmats, transforms, positions, params.transl)
 
 
+@jax.jit
 def posed_skeleton(model: BodyModel, params: SMPLXParams) -> Skeleton:
     """Global joint rotations and positions of one posed body (what copy-and-paste and IK need)."""
     _, _, _, glob_rotmats, positions = _posed_skeleton(model, params)
