@@ -18,13 +18,38 @@ def _one(params, i):
 
 
 def test_jit_equals_eager(default_model_dir):
+    """Compiled against each operation run alone (``jax.disable_jit``: the public functions are jitted)."""
     model = load(default_model_dir)
     params = _one(random_params(seed=3, batch=1), 0)
-    eager, jitted = smplx_jax.forward(model, params), FORWARD(model, params)
+    with jax.disable_jit():
+        eager, eager_joints = smplx_jax.forward(model, params), smplx_jax.forward_joints(model, params)
+    jitted = FORWARD(model, params)
     np.testing.assert_allclose(np.asarray(jitted.vertices), np.asarray(eager.vertices), atol=2e-6)
     np.testing.assert_allclose(np.asarray(jitted.joints), np.asarray(eager.joints), atol=2e-6)
-    np.testing.assert_allclose(np.asarray(JOINTS(model, params)), np.asarray(smplx_jax.forward_joints(model, params)),
-                               atol=2e-6)
+    np.testing.assert_allclose(np.asarray(JOINTS(model, params)), np.asarray(eager_joints), atol=2e-6)
+
+
+def test_an_eager_call_runs_one_compiled_program(default_model_dir):
+    """Called outside any jit (here vmapped over a batch of 5, a shape no other test uses), a forward pass lowers
+    one program, not each of its operations, and nothing on its second call."""
+    model = load(default_model_dir)
+    params = random_params(seed=7, batch=5)
+    lowered = []
+
+    def count(event, seconds, **kwargs):
+        if event == "/jax/core/compile/jaxpr_to_mlir_module_duration":
+            lowered.append(event)
+
+    jax.monitoring.register_event_duration_secs_listener(count)
+    try:
+        counts = []
+        for fn in (smplx_jax.forward_joints, smplx_jax.forward, smplx_jax.posed_skeleton) * 2:
+            before = len(lowered)
+            jax.block_until_ready(jax.vmap(fn, in_axes=(None, 0))(model, params))
+            counts.append(len(lowered) - before)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(count)
+    assert counts == [1, 1, 1, 0, 0, 0], counts
 
 
 def test_vmap_equals_loop(default_model_dir):
