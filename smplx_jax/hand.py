@@ -8,6 +8,7 @@ rigidly. Pose blend shapes keep the finger joints' columns.
 import dataclasses
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
@@ -83,6 +84,7 @@ def hand_model(model: BodyModel, side: Side) -> HandModel:
     )
 
 
+@jax.jit  # as `smplx_jax.forward`: one compiled program per shape when called eagerly
 def hand_forward(
     hand: HandModel,
     wrist_glob_rotmat: Float[Array, "3 3"],

@@ -1,5 +1,7 @@
 """Properties of the forward passes: jit = eager, vmap = loop, no recompilation, gradients."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,10 +32,15 @@ def test_jit_equals_eager(default_model_dir):
 
 
 def test_an_eager_call_runs_one_compiled_program(default_model_dir):
-    """Called outside any jit (here vmapped over a batch of 5, a shape no other test uses), a forward pass lowers
-    one program, not each of its operations, and nothing on its second call."""
+    """Called outside any jit (here vmapped over a batch of 5, a shape no other test uses), a forward pass of the
+    body or a hand lowers one program, not each of its operations, and nothing on its second call."""
     model = load(default_model_dir)
     params = random_params(seed=7, batch=5)
+    hand_args = (smplx_jax.hand_model(model, "left"), smplx_jax.rotations.rotvec_to_rotmat(params.global_orient),
+                 params.left_hand_pose, params.betas)
+    calls = [functools.partial(jax.vmap(fn, in_axes=(None, 0)), model, params)
+             for fn in (smplx_jax.forward_joints, smplx_jax.forward, smplx_jax.posed_skeleton)]
+    calls.append(functools.partial(jax.vmap(smplx_jax.hand_forward, in_axes=(None, 0, 0, 0)), *hand_args))
     lowered = []
 
     def count(event, seconds, **kwargs):
@@ -43,13 +50,13 @@ def test_an_eager_call_runs_one_compiled_program(default_model_dir):
     jax.monitoring.register_event_duration_secs_listener(count)
     try:
         counts = []
-        for fn in (smplx_jax.forward_joints, smplx_jax.forward, smplx_jax.posed_skeleton) * 2:
+        for call in calls * 2:
             before = len(lowered)
-            jax.block_until_ready(jax.vmap(fn, in_axes=(None, 0))(model, params))
+            jax.block_until_ready(call())
             counts.append(len(lowered) - before)
     finally:
         jax.monitoring.unregister_event_duration_listener(count)
-    assert counts == [1, 1, 1, 0, 0, 0], counts
+    assert counts == [1, 1, 1, 1, 0, 0, 0, 0], counts
 
 
 def test_vmap_equals_loop(default_model_dir):
