@@ -176,8 +176,6 @@ def frankmocap_run(frankmocap, tmp_path_factory):
     return weights_run
 
 
-_frames_joints = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
-
 # upper arms, forearms, thighs, shins
 LIMB_BONES = ((16, 18), (17, 19), (18, 20), (19, 21), (1, 4), (2, 5), (4, 7), (5, 8))
 
@@ -185,13 +183,16 @@ LIMB_BONES = ((16, 18), (17, 19), (18, 20), (19, 21), (1, 4), (2, 5), (4, 7), (5
 def assert_one_body(motion: dict, frames=slice(None)) -> None:
     """One shape for the person over ``frames`` of ``motion``'s valid ones: ``betas`` the same row (per-component
     std <= 0.01) and the limb bones' lengths within 0.5% of their median."""
+    from jaxmocap.batching import map_in_buckets
+    from jaxmocap.integrate.fitting import BUCKETS
     from jaxmocap.motion import motion_params
 
     model = load(default_model_path().parent.parent)
     valid = np.flatnonzero(motion["valid"])[frames]
     assert len(valid) >= 2 and motion["betas"][valid].std(0).max() <= 0.01, motion["betas"][valid].std(0)
-    rows = np.resize(valid, 128 * -(-len(valid) // 128))  # the frames repeated up to a multiple of 128: one program
-    joints = np.asarray(_frames_joints(model, motion_params(motion, model.num_expression, rows)))[:len(valid)]
+    joints = np.asarray(map_in_buckets(  # the run's batch sizes: a few compiled programs for any number of frames
+        lambda chunk, _: jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, chunk),
+        motion_params(motion, model.num_expression, valid), BUCKETS))
     for a, b in LIMB_BONES:
         length = np.linalg.norm(joints[:, a] - joints[:, b], axis=-1)
         assert np.ptp(length) <= 0.005 * np.median(length), (a, b, length.min(), length.max())
