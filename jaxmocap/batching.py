@@ -28,7 +28,7 @@ def pad_rows(a, size: int):
 def map_in_buckets(fn, tree, buckets: tuple[int, ...]):
     """``fn(chunk, n)`` over the leading axis of the arrays of ``tree`` (at least one row): in chunks of at most the
     largest bucket, each padded by `pad_rows` to its `bucket_size` (its first ``n`` rows are real); returns the
-    real rows of the outputs, concatenated."""
+    real rows of the outputs, concatenated (NumPy outputs stay NumPy)."""
     total = len(jax.tree.leaves(tree)[0])
     outs = []
     for start in range(0, total, buckets[-1]):
@@ -36,4 +36,5 @@ def map_in_buckets(fn, tree, buckets: tuple[int, ...]):
         # (slicing or padding a JAX array runs a program: none where the rows are whole)
         chunk = jax.tree.map(lambda a: pad_rows(a if n == total else a[start:start + n], bucket_size(n, buckets)), tree)
         outs.append(jax.tree.map(lambda a: a if n == len(a) else a[:n], fn(chunk, n)))
-    return outs[0] if len(outs) == 1 else jax.tree.map(lambda *parts: jnp.concatenate(parts), *outs)
+    return outs[0] if len(outs) == 1 else jax.tree.map(
+        lambda *parts: (jnp if isinstance(parts[0], jax.Array) else np).concatenate(parts), *outs)

@@ -28,3 +28,5 @@ def test_map_in_buckets_sees_only_bucket_sizes_and_returns_the_real_rows():
     assert seen == [(16, 16), (16, 16), (16, 5)]
     np.testing.assert_array_equal(out["y"], 2 * x)
     np.testing.assert_array_equal(out["z"], x[:, 0] + w)
+    numpy_out = map_in_buckets(lambda chunk, n: 2 * chunk, x, BUCKETS)  # NumPy in, NumPy out: no programs run
+    assert type(numpy_out) is np.ndarray and np.array_equal(numpy_out, 2 * x)

@@ -233,9 +233,9 @@ def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progre
     """`fit` of at most `SOLVE_FRAMES` frames ``(keypoints, pose, betas, camera, free)``, in rounds of `ROUND_STEPS`
     steps: each round runs the frames still going in as few padded batches as hold them, so no batch waits on its
     slowest frame (a frame takes the steps it would alone, up to float32's rounding in batches of other sizes)."""
-    def batches(fn, tree, keep=np.array):
-        return jax.tree.map(keep, map_in_buckets(lambda chunk, n: fn(*shard_frames(chunk, _rows(chunk))), tree,
-                                                 BUCKETS))
+    def batches(fn, tree, keep=np.array):  # (kept before their real rows are cut: no slicing program per size)
+        return map_in_buckets(lambda chunk, n: jax.tree.map(keep, fn(*shard_frames(chunk, _rows(chunk)))), tree,
+                              BUCKETS)
 
     program = dataclasses.replace(config, iterations=0)  # the cap is this loop's: another compiles nothing new
     problem, start, camera, state = batches(
