@@ -426,18 +426,21 @@ def test_someone_cut_by_the_frames_edge_is_found_within_a_fifth_of_a_second():
     frame, so a new track of her is often lost in its next frame. A search that meets someone the model is unsure
     of, or a lost track, starts a burst of searches in each frame for one search interval: she is reported from
     frame 11 (0.18 s) and in 85 of the 100 frames (searching every 0.2 s alone: from frame 25, in 70). A detector
-    restored in the middle of a burst continues as the original."""
+    restored in the middle of a burst continues as the original. Her detection points down (turned ~170 degrees:
+    her head is out of view), and the landmark model on that upturned crop lays a skeleton head down over her;
+    tried upright too, she is tracked standing."""
     from jaxmocap.detect.detector import search_interval
     from jaxmocap.frame_source import open_media
 
     media, frames = open_media(DATA / "pose2sim_multi_cam01.mp4", 0, None, 1)
     left, width = media.size[0] // 4, media.size[0] // 2
     detector = Detector(static_image_mode=False, max_people=2, hands=False, redetect_every=search_interval(media.fps))
-    counts, restored = [], None
+    counts, restored, head_down = [], None, 0
     for index, frame in frames:
         frame = np.ascontiguousarray(frame[:, left:left + width])
         people = detector(frame)
         counts.append(len(people))
+        head_down += sum(p.body[[11, 12], 1].mean() > p.body[[23, 24], 1].mean() for p in people)  # shoulders below hips
         if restored is not None and index <= 16:
             assert [p.track for p in restored(frame)] == [p.track for p in people]
         if index == 4:  # the track found in frame 3 was lost in frame 4
@@ -447,3 +450,4 @@ def test_someone_cut_by_the_frames_edge_is_found_within_a_fifth_of_a_second():
             restored.restore({k: v.copy() for k, v in detector.state().items()})
     assert counts.index(2) <= search_interval(media.fps), counts
     assert counts.count(2) >= 80, counts
+    assert head_down == 0  # her detection points down: tried upright too, she is tracked upright

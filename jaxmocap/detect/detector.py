@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -11,7 +12,7 @@ from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models
 from .pose import PoseEstimator, PoseResult, landmark_box, overlap, rect_extent, rect_iou
-from .roi import Rect
+from .roi import Rect, normalize_radians
 from .ssd import Detection, in_image, square_tiles
 
 SIDES = ("left", "right")
@@ -23,6 +24,7 @@ CONFIRM_FRAMES = 2  # a person found beside others is reported once tracked in t
 # (someone cut by the frame's edge: 0.03-0.9 on the two-person take's cropped view, swinging from frame to frame)
 # starts a burst of searches, as a lost track does (`Detector`)
 DOUBTFUL_PRESENCE = 0.1
+UPSIDE_DOWN = 0.75 * math.pi  # a detection turned more than this (radians) is tried upright too
 
 
 def search_interval(fps: float | None) -> int:
@@ -185,12 +187,23 @@ class Detector:
             if any(rect_iou(roi, p.roi) > 0.5 or rect_iou(roi, p.next_roi) > 0.5 or _at_hips(det, p, size)
                    for p in found):
                 continue
-            result = self._pose.landmarks(image, roi, 0.0)
+            result = self._upright(image, roi)
             if result.presence < self.min_tracking_confidence:
                 unsure |= result.presence >= DOUBTFUL_PRESENCE
             elif not any(_same_person(result, p, size) for p in found):
                 found.append(result)
         return found[len(known):], unsure
+
+    def _upright(self, image: np.ndarray, roi: Rect) -> PoseResult:
+        """The landmarks in a person detection's ``roi``; where that stands the person on their head (turned by more
+        than `UPSIDE_DOWN`), also in it turned by 180 degrees, and the more present of the two. Cut by the frame's
+        edge, a person's detection can point the wrong way, and on the upturned crop the landmark model lays a
+        whole skeleton head down over them, which tracking then follows."""
+        result = self._pose.landmarks(image, roi, 0.0)
+        if abs(normalize_radians(roi.rotation)) <= UPSIDE_DOWN:
+            return result
+        turned = self._pose.landmarks(image, roi._replace(rotation=normalize_radians(roi.rotation + math.pi)), 0.0)
+        return turned if turned.presence > result.presence else result
 
     def _people(self, image: np.ndarray) -> list[_Track]:
         size = (image.shape[1], image.shape[0])
