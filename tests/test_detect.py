@@ -440,7 +440,7 @@ def test_someone_cut_by_the_frames_edge_is_found_within_a_fifth_of_a_second():
         frame = np.ascontiguousarray(frame[:, left:left + width])
         people = detector(frame)
         counts.append(len(people))
-        head_down += sum(p.body[[11, 12], 1].mean() > p.body[[23, 24], 1].mean() for p in people)  # shoulders below hips
+        head_down += sum(p.body[[11, 12], 1].mean() > p.body[[23, 24], 1].mean() for p in people)  # shoulders low
         if restored is not None and index <= 16:
             assert [p.track for p in restored(frame)] == [p.track for p in people]
         if index == 4:  # the track found in frame 3 was lost in frame 4
