@@ -11,9 +11,6 @@ import smplx_jax
 from conftest import load
 from params_util import random_params
 
-FORWARD = jax.jit(smplx_jax.forward)
-JOINTS = jax.jit(smplx_jax.forward_joints)
-
 
 def _one(params, i):
     return jax.tree.map(lambda a: a[i], params)
@@ -25,10 +22,11 @@ def test_jit_equals_eager(default_model_dir):
     params = _one(random_params(seed=3, batch=1), 0)
     with jax.disable_jit():
         eager, eager_joints = smplx_jax.forward(model, params), smplx_jax.forward_joints(model, params)
-    jitted = FORWARD(model, params)
+    jitted = smplx_jax.forward(model, params)
     np.testing.assert_allclose(np.asarray(jitted.vertices), np.asarray(eager.vertices), atol=2e-6)
     np.testing.assert_allclose(np.asarray(jitted.joints), np.asarray(eager.joints), atol=2e-6)
-    np.testing.assert_allclose(np.asarray(JOINTS(model, params)), np.asarray(eager_joints), atol=2e-6)
+    np.testing.assert_allclose(np.asarray(smplx_jax.forward_joints(model, params)), np.asarray(eager_joints),
+                               atol=2e-6)
 
 
 def test_an_eager_call_runs_one_compiled_program(default_model_dir):
@@ -64,14 +62,15 @@ def test_vmap_equals_loop(default_model_dir):
     params = random_params(seed=4, batch=3)
     batched = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))(model, params)
     for i in range(3):
-        np.testing.assert_allclose(np.asarray(batched[i]), np.asarray(JOINTS(model, _one(params, i))), atol=2e-6)
+        alone = smplx_jax.forward_joints(model, _one(params, i))
+        np.testing.assert_allclose(np.asarray(batched[i]), np.asarray(alone), atol=2e-6)
 
 
 def test_second_call_does_not_recompile(default_model_dir):
     model = load(default_model_dir)
-    fn = jax.jit(smplx_jax.forward_joints)
+    fn = smplx_jax.forward_joints  # jitted
     fn(model, _one(random_params(seed=5, batch=1), 0))
-    compiled = fn._cache_size()  # jit wrappers of one function share a cache: other tests may have filled it
+    compiled = fn._cache_size()  # other tests may have filled its cache
     again = smplx_jax.load_model(default_model_dir / "smplx" / "SMPLX_NEUTRAL.npz")  # new arrays, same structure
     fn(again, _one(random_params(seed=6, batch=1), 0))
     assert fn._cache_size() == compiled
@@ -79,7 +78,7 @@ def test_second_call_does_not_recompile(default_model_dir):
 
 def test_output_shapes(default_model_dir):
     model = load(default_model_dir)
-    out = FORWARD(model, smplx_jax.SMPLXParams.zeros())
+    out = smplx_jax.forward(model, smplx_jax.SMPLXParams.zeros())
     assert out.vertices.shape == (model.num_vertices, 3) and out.joints.shape == (127, 3)
     assert out.vertices.dtype == jnp.float32
 
