@@ -47,6 +47,11 @@ def steps_on_one_batch(body_model, count: int):
     return state, totals
 
 
+def compared(state) -> list[np.ndarray]:
+    """What the sharded step must equal: the weights, BatchNorm's statistics and Adam's moments, as NumPy arrays."""
+    return [np.asarray(a) for a in jax.tree.leaves(jax.device_get((state.params, state.batch_stats, state.opt_state)))]
+
+
 def test_steps_lower_the_loss_on_a_fixed_batch(body_model):
     state, totals = steps_on_one_batch(body_model, 12)
     assert all(np.isfinite(totals)) and int(state.step) == 12
@@ -74,7 +79,7 @@ SHARDED = textwrap.dedent("""
     import sys
     import jax, numpy as np
     import smplx_jax
-    from test_train import SMOKE, fixed_batch
+    from test_train import SMOKE, compared, fixed_batch
     from train.train import create, data_parallel, global_batch, jitted_train_step
 
     assert jax.device_count() == 4
@@ -84,9 +89,7 @@ SHARDED = textwrap.dedent("""
     assert len(batch.image.sharding.device_set) == 4
     state, terms = jitted_train_step(setup, jax.device_put(constants, shardings.replicated),
                                      jax.device_put(state, shardings.replicated), batch)
-    leaves = [np.asarray(a) for a in jax.tree.leaves(jax.device_get((state.params, state.batch_stats,
-                                                                     state.opt_state)))]
-    np.savez(sys.argv[1], total=float(terms["total"]), *leaves)
+    np.savez(sys.argv[1], total=float(terms["total"]), *compared(state))
 """)
 
 
@@ -101,8 +104,7 @@ def test_sharded_step_equals_single_device_step(tmp_path, body_model):
                           text=True, env=env, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     sharded = np.load(tmp_path / "sharded.npz")
-    leaves = [np.asarray(a) for a in jax.tree.leaves(jax.device_get((single.params, single.batch_stats,
-                                                                     single.opt_state)))]
+    leaves = compared(single)
     assert len(sharded.files) == len(leaves) + 1
     gap = max(float(np.max(np.abs(sharded[f"arr_{i}"] - b)) / (np.max(np.abs(b)) + 1e-12))
               for i, b in enumerate(leaves))
