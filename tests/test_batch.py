@@ -236,12 +236,13 @@ def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, r
 def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
     """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video listed as stopped in batch.json, its
     stored chunks kept for the next call, nothing half-written, and the local Ray (which listened on 127.0.0.1
-    alone) gone. Frames 20-60 (ten chunks of the same shapes), so that the video is still running when the signal
-    comes. Started as from a terminal (`conftest.cli_as_from_a_terminal`): in a suite run as a background job the
-    batch otherwise ignored the signal and finished the video (exit 0)."""
+    alone) gone. Frames 20-100 (twenty chunks of the same shapes), so that the video is still running when the
+    signal comes (with frames 20-60, a suite run on three workers once saw the video finish first). Started as from
+    a terminal (`conftest.cli_as_from_a_terminal`): in a suite run as a background job the batch otherwise ignored
+    the signal and finished the video (exit 0)."""
     env, _ = ray_env
     out = tmp_path / "out"
-    options = [*OPTIONS[:3], "60", *OPTIONS[4:]]
+    options = [*OPTIONS[:3], "100", *OPTIONS[4:]]
     batch = subprocess.Popen(cli_as_from_a_terminal("batch", str(CLIP), "--out", str(out), "--workers", "1", *options),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:

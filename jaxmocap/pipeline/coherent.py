@@ -6,12 +6,15 @@ neighbour's rotations of the joints that turned (`_start`), the person's shape h
 reprojects no farther from the keypoints than the frame's own (within `TIE_PX`, a tie in float32): the ambiguity
 resolved as in the frames beside it. A turn the image demands (the refit reprojects farther) stays. (Letting
 refits reproject 10% or 1 px farther took cam01 from 61.0 to 63.8-65.2 mm PA-MPJPE: poses the image does not
-support.) A turn of the wrists alone is the hand's own ambiguity, its fingers bent to match either turn: refitted
-with that hand's fingers free, it is taken within `WRIST_TIE_PX` (those refits of cam01 at 30 fps came within
-0.7-1 px; taken, its joint-frames turning > 45 degrees went from 1.1 to 0.6%; cam01 from 59.3 to 59.9 mm, at
-half scale from 60.5 to 57.6, each other variant of cam01 and cam03 within 0.1 mm). A frame that keeps its fit
-takes the twists of its turned bones from the neighbour (`untwisted`): a twist handed between a joint and its
-child (a thigh turned one way about itself and the shin back) moves no keypoint, so the image cannot choose it.
+support. A tie of the standard error of the frame's mean distance, or half of it, took the two-person take's woman
+at 30 frames/s from 1.3% of joint-frames turning > 45 degrees to 0.4 or 0.7%, and cam01 mirrored from 61.6 to
+63.6 mm either way.) A turn of the wrists alone is the hand's own ambiguity, its fingers bent to match either
+turn: refitted with that hand's fingers free, it is taken within `WRIST_TIE_PX` (those refits of cam01 at 30 fps
+came within 0.7-1 px; taken, its joint-frames turning > 45 degrees went from 1.1 to 0.6%; cam01 from 59.3 to
+59.9 mm, at half scale from 60.5 to 57.6, each other variant of cam01 and cam03 within 0.1 mm). A frame that
+keeps its fit takes the twists of its turned bones from the neighbour (`untwisted`): a twist handed between a joint
+and its child (a thigh turned one way about itself and the shin back) moves no keypoint, so the image cannot
+choose it.
 Before all this, in every frame of a fitted run, the neck and the collars hand their twists on to the head and the
 shoulders (`girdle_untwisted`): ball joints both, so the pose is the one the keypoints and the children's
 orientations give.
