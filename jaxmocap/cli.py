@@ -1,12 +1,38 @@
 """The ``jaxmocap`` command line."""
 
 import argparse
+import contextlib
 import functools
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from jaxmocap.compile_cache import use_compilation_cache
 from jaxmocap.errors import InputError
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    """Inside, SIGTERM (``kill``, ``timeout``, a job scheduler or container stopping the command) raises
+    KeyboardInterrupt where Ctrl-C would, so that it stops a command as cleanly (atomic writes rolled back, stored
+    chunks kept, a batch's videos listed as stopped, a live session's recording written); the list yielded holds the
+    signal once it came, which tells the two apart. In the main thread only (elsewhere signals do not arrive); the
+    previous handler is restored after."""
+    received = []
+
+    def interrupt(signum, frame):
+        received.append(signum)
+        raise KeyboardInterrupt("SIGTERM")
+
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield received
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _cmd_model(args):
@@ -297,15 +323,17 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command != "bench":  # benchmarks time first runs, compilation included
         use_compilation_cache()
-    try:
-        code = args.run(args)
-    except (InputError, ModelFileError, OSError) as err:
-        print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:  # `live` stops on Ctrl-C by itself; elsewhere it interrupts
-        resume = "; run the same command again to resume" if args.command in ("run", "demo", "batch") else ""
-        print(f"jaxmocap {args.command}: interrupted{resume}", file=sys.stderr)
-        return 130
+    with _sigterm_interrupts() as terminated:
+        try:
+            code = args.run(args)
+        except (InputError, ModelFileError, OSError) as err:
+            print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:  # `live` stops on Ctrl-C (or SIGTERM) by itself; elsewhere it interrupts
+            resume = "; run the same command again to resume" if args.command in ("run", "demo", "batch") else ""
+            print(f"jaxmocap {args.command}: {'terminated' if terminated else 'interrupted'}{resume}",
+                  file=sys.stderr)
+            return 128 + (signal.SIGTERM if terminated else signal.SIGINT)
     return code or 0  # `batch`: 1 when a video failed
 
 

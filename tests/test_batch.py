@@ -233,13 +233,15 @@ def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, r
     assert seconds < 0.25 * first_seconds, (seconds, first_seconds)
 
 
-def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
-    """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video listed as stopped in batch.json, its
-    stored chunks kept for the next call, nothing half-written, and the local Ray (which listened on 127.0.0.1
-    alone) gone. Frames 20-100 (twenty chunks of the same shapes), so that the video is still running when the
-    signal comes (with frames 20-60, a suite run on three workers once saw the video finish first). Started as from
-    a terminal (`conftest.cli_as_from_a_terminal`): in a suite run as a background job the batch otherwise ignored
-    the signal and finished the video (exit 0)."""
+@pytest.mark.parametrize("stop, code, note", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
+def test_ctrl_c_or_sigterm_stops_the_batch_cleanly(ray_env, tmp_path, stop, code, note):
+    """SIGINT (Ctrl-C), or SIGTERM (``kill``, a job scheduler; Ray's own handler would end the batch at once),
+    mid-video: exit 130 or 143 with a one-line note, the video listed as stopped in batch.json, its stored chunks
+    kept for the next call, nothing half-written, and the local Ray (which listened on 127.0.0.1 alone) gone.
+    Frames 20-100 (twenty chunks of the same shapes), so that the video is still running when the signal comes
+    (with frames 20-60, a suite run on three workers once saw the video finish first). Started as from a terminal
+    (`conftest.cli_as_from_a_terminal`): in a suite run as a background job the batch otherwise ignored SIGINT and
+    finished the video (exit 0)."""
     env, _ = ray_env
     out = tmp_path / "out"
     options = [*OPTIONS[:3], "100", *OPTIONS[4:]]
@@ -250,12 +252,12 @@ def test_ctrl_c_stops_the_batch_cleanly(ray_env, tmp_path):
         ray_processes = psutil.Process(batch.pid).children(recursive=True)
         listening = [c.laddr.ip for p in ray_processes for c in p.net_connections("inet") if c.status == "LISTEN"]
         assert listening and set(listening) <= set(LOOPBACK), listening
-        batch.send_signal(signal.SIGINT)
+        batch.send_signal(stop)
         stdout, stderr = batch.communicate(timeout=180)
     finally:
         batch.kill()
-    assert batch.returncode == 130, (stdout, stderr)
-    assert stderr.strip().splitlines()[-1] == "jaxmocap batch: interrupted; run the same command again to resume"
+    assert batch.returncode == code, (stdout, stderr)
+    assert stderr.strip().splitlines()[-1] == f"jaxmocap batch: {note}; run the same command again to resume"
     assert "Traceback" not in stderr
     assert not temporary_files(out) and not (out / CLIP.stem / "motion.npz").exists()
     assert (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists()

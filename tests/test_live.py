@@ -4,6 +4,7 @@ back, agreement with the offline run, and the command's exits (Ctrl-C, a camera 
 
 import ipaddress
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -304,6 +305,28 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
     assert process.returncode == 0, err
     assert out.startswith("interrupted: ") and "frames/s" in out
     assert read_motion(tmp_path / "motion.npz")["valid"].sum() >= 10
+
+
+def test_stopping_is_sheltered_from_a_second_ctrl_c_or_sigterm():
+    """While a session stops (its recording written), Ctrl-C and SIGTERM do nothing; the handlers are back after.
+    (The test's handlers fail it if a signal reaches them inside.)"""
+    from jaxmocap.live.session import _sheltered
+
+    assert threading.current_thread() is threading.main_thread()  # where signals arrive
+
+    def reached_the_test(signum, frame):
+        raise AssertionError(f"signal {signum} reached the test's handler inside the shelter")
+
+    previous = {s: signal.signal(s, reached_the_test) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with _sheltered():
+            for s in previous:
+                os.kill(os.getpid(), s)
+            time.sleep(0.05)  # (handlers run in the main thread between bytecodes)
+        assert all(signal.getsignal(s) is reached_the_test for s in previous)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 def _listening_on(port: int) -> list[str]:

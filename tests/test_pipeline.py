@@ -2,9 +2,12 @@
 
 import dataclasses
 import json
+import os
 import pickle
 import pickletools
+import signal
 import struct
+import threading
 from pathlib import Path
 
 import cv2
@@ -265,6 +268,36 @@ def test_interrupted_run_resumes_to_the_same_motion(result, tmp_path, monkeypatc
     assert not (tmp_path / "motion.npz").exists() and len(list((tmp_path / ".jaxmocap_chunks").glob("*.npz"))) == 1
     run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
     assert (tmp_path / "motion.npz").read_bytes() == (out / "motion.npz").read_bytes()
+
+
+def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path, monkeypatch, capsys):
+    """SIGTERM (``kill``, ``timeout``, a job scheduler) as the second chunk starts: exit 143 with a one-line note,
+    the first chunk stored for the next call, nothing half-written, the process's own SIGTERM handler back after.
+    (The test's handler fails it if the signal reaches it during the run; unhandled, it would end the process.)"""
+    assert threading.current_thread() is threading.main_thread()  # where signals arrive
+    solve, calls = pipeline_job.solve_chunk, []
+
+    def terminated_at_the_second(*args):
+        calls.append(1)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return solve(*args)
+
+    def reached_the_test(signum, frame):
+        raise AssertionError("SIGTERM reached the test's handler: the command set none")
+
+    monkeypatch.setattr(pipeline_job, "solve_chunk", terminated_at_the_second)
+    previous = signal.signal(signal.SIGTERM, reached_the_test)
+    try:
+        code = main(["run", str(CLIP), "--out", str(tmp_path), "--start", "20", "--end", str(20 + FRAMES), "--chunk",
+                     str(CHUNK), "--no-overlay", "--quiet"])
+        assert signal.getsignal(signal.SIGTERM) is reached_the_test
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert code == 143
+    assert capsys.readouterr().err == "jaxmocap run: terminated; run the same command again to resume\n"
+    assert not (tmp_path / "motion.npz").exists() and len(list((tmp_path / ".jaxmocap_chunks").glob("*.npz"))) == 1
+    assert not [p for p in tmp_path.rglob(".*") if ".tmp" in p.name]
 
 
 def test_clip_without_people(tmp_path):

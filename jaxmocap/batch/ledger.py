@@ -15,7 +15,7 @@ from jaxmocap.pipeline.config import AT_THE_END, RunConfig, chunk_key
 
 MARKS = ".jaxmocap_batch"
 STATUSES = ("done", "failed", "stopped")
-STOPPED = "stopped by Ctrl-C before it finished; the same command resumes it"
+STOPPED = "stopped (Ctrl-C or SIGTERM) before it finished; the same command resumes it"
 
 
 @dataclass(frozen=True)

@@ -240,7 +240,7 @@ class Session:
                 stopped = "max frames"
         except KeyboardInterrupt:
             stopped = "interrupted"
-        with _sheltered():  # a second Ctrl-C while stopping must not lose the recording
+        with _sheltered():  # a second Ctrl-C (or SIGTERM) while stopping must not lose the recording
             self.source.stop()
             self.detected.close()
             self.shown.close()
@@ -273,13 +273,14 @@ class Session:
 
 @contextlib.contextmanager
 def _sheltered():
-    """Ctrl-C ignored inside (in the main thread; elsewhere signals do not arrive)."""
+    """Ctrl-C and SIGTERM ignored inside (in the main thread; elsewhere signals do not arrive)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
