@@ -104,10 +104,14 @@ def load(model_dir: Path) -> smplx_jax.BodyModel:
     return _LOADED[model_dir]
 
 
+def _ctrl_c():
+    raise KeyboardInterrupt
+
+
 @contextlib.contextmanager
-def interrupted_at_chunk(monkeypatch, index: int):
-    """Within the block, ``jaxmocap run`` stops (KeyboardInterrupt, as Ctrl-C) when it comes to solve its chunk
-    number ``index`` (0-based; stored chunks are not solved again)."""
+def interrupted_at_chunk(monkeypatch, index: int, stop=_ctrl_c):
+    """Within the block, ``jaxmocap run`` calls ``stop`` (default: KeyboardInterrupt, as Ctrl-C) when it comes to
+    solve its chunk number ``index`` (0-based; stored chunks are not solved again)."""
     import jaxmocap.pipeline.job as job
 
     solve, calls = job.solve_chunk, []
@@ -115,7 +119,7 @@ def interrupted_at_chunk(monkeypatch, index: int):
     def solve_or_stop(*args):
         calls.append(1)
         if len(calls) == index + 1:
-            raise KeyboardInterrupt
+            stop()
         return solve(*args)
 
     monkeypatch.setattr(job, "solve_chunk", solve_or_stop)

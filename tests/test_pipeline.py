@@ -275,22 +275,15 @@ def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path, monkeypatch, capsys):
     the first chunk stored for the next call, nothing half-written, the process's own SIGTERM handler back after.
     (The test's handler fails it if the signal reaches it during the run; unhandled, it would end the process.)"""
     assert threading.current_thread() is threading.main_thread()  # where signals arrive
-    solve, calls = pipeline_job.solve_chunk, []
-
-    def terminated_at_the_second(*args):
-        calls.append(1)
-        if len(calls) == 2:
-            os.kill(os.getpid(), signal.SIGTERM)
-        return solve(*args)
 
     def reached_the_test(signum, frame):
         raise AssertionError("SIGTERM reached the test's handler: the command set none")
 
-    monkeypatch.setattr(pipeline_job, "solve_chunk", terminated_at_the_second)
     previous = signal.signal(signal.SIGTERM, reached_the_test)
     try:
-        code = main(["run", str(CLIP), "--out", str(tmp_path), "--start", "20", "--end", str(20 + FRAMES), "--chunk",
-                     str(CHUNK), "--no-overlay", "--quiet"])
+        with interrupted_at_chunk(monkeypatch, 1, stop=lambda: os.kill(os.getpid(), signal.SIGTERM)):
+            code = main(["run", str(CLIP), "--out", str(tmp_path), "--start", "20", "--end", str(20 + FRAMES),
+                         "--chunk", str(CHUNK), "--no-overlay", "--quiet"])
         assert signal.getsignal(signal.SIGTERM) is reached_the_test
     finally:
         signal.signal(signal.SIGTERM, previous)
