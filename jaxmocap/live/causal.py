@@ -77,11 +77,11 @@ class Solved(NamedTuple):
 
 
 class Models(NamedTuple):
-    """The keypoint models of a step: BlazePose's joints, each hand's 21, OpenPose's 67."""
+    """The keypoint models of a step: BlazePose's joints, the hands' 21 (the left's and the right's stacked on a
+    leading axis of 2: one vmapped IK solves both), OpenPose's 67."""
 
     body: KeypointModel
-    left: KeypointModel
-    right: KeypointModel
+    hands: KeypointModel
     openpose: KeypointModel
 
 
@@ -101,7 +101,8 @@ def host() -> jax.Device:
     return jax.devices("cpu")[0]
 
 
-_MASKS = tuple(jnp.asarray(m, jnp.float32) for m in (BODY_IK_JOINTS, LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS))
+_BODY_MASK = jnp.asarray(BODY_IK_JOINTS, jnp.float32)
+_HAND_MASKS = jnp.asarray([LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS], jnp.float32)  # (2, 55)
 
 
 @functools.partial(jax.jit, static_argnames=("num_expression", "settings"))
@@ -114,12 +115,14 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
     ik_config = IKConfig(iterations=settings.ik_iterations)
     targets, conf = blazepose_targets(world)
     rest = default_pose()  # the priors' centre, as in the offline IK (`body_from_blazepose`, `hand_into_body`)
-    theta, betas, _, _ = ik_one(models.body, targets, conf, state.theta, state.betas, _MASKS[0], 0.0, ik_config,
+    theta, betas, _, _ = ik_one(models.body, targets, conf, state.theta, state.betas, _BODY_MASK, 0.0, ik_config,
                                 rest)
-    for side, km in enumerate((models.left, models.right) if settings.hands else ()):
-        seen = jnp.full(21, jnp.where(hands_conf[side] > 0, 1.0, 0.0))
-        theta, betas, _, _ = ik_one(km, hands_world[side], seen, theta, betas, _MASKS[1 + side], 0.0, ik_config,
-                                    rest)
+    if settings.hands:  # each hand's wrist and fingers, from the body's pose (the two free sets are disjoint)
+        seen = jnp.repeat(jnp.where(hands_conf > 0, 1.0, 0.0)[:, None], 21, 1)
+        sides = jax.vmap(lambda km, world, seen, mask: ik_one(km, world, seen, theta, betas, mask, 0.0, ik_config,
+                                                              rest)[0])(models.hands, hands_world, seen, _HAND_MASKS)
+        theta = jnp.where(_HAND_MASKS[0][:, None] > 0, sides[0], jnp.where(_HAND_MASKS[1][:, None] > 0, sides[1],
+                                                                           theta))
     fit_config = dataclasses.replace(FIT_FROM_IK, iterations=settings.fit_iterations)
     settled = state.shape_seconds >= settings.shape_settle
     fitted = fit_one(models.openpose, keypoints, theta, jnp.where(settled, state.shape, betas), None, lens,
@@ -150,9 +153,10 @@ class CausalSolver:
 
     def __init__(self, model: smplx_jax.BodyModel, lens: Lens, settings: LiveSettings = LiveSettings()):
         self.device = host()
-        self.models = jax.device_put(Models(keypoint_model(model, BLAZEPOSE_JOINTS),
-                                            keypoint_model(model, constants.LEFT_HAND21_FROM_SMPLX),
-                                            keypoint_model(model, constants.RIGHT_HAND21_FROM_SMPLX),
+        hands = jax.tree.map(lambda *sides: jnp.stack(sides), *(
+            keypoint_model(model, index) for index in (constants.LEFT_HAND21_FROM_SMPLX,
+                                                       constants.RIGHT_HAND21_FROM_SMPLX)))
+        self.models = jax.device_put(Models(keypoint_model(model, BLAZEPOSE_JOINTS), hands,
                                             openpose_keypoint_model(model)), self.device)
         self.lens = jax.device_put(lens_arrays(lens[0], lens[1], jnp.float32), self.device)
         self.num_betas, self.num_expression = model.num_betas, model.num_expression
