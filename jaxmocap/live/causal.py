@@ -121,8 +121,8 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
         seen = jnp.repeat(jnp.where(hands_conf > 0, 1.0, 0.0)[:, None], 21, 1)
         sides = jax.vmap(lambda km, world, seen, mask: ik_one(km, world, seen, theta, betas, mask, 0.0, ik_config,
                                                               rest)[0])(models.hands, hands_world, seen, _HAND_MASKS)
-        theta = jnp.where(_HAND_MASKS[0][:, None] > 0, sides[0], jnp.where(_HAND_MASKS[1][:, None] > 0, sides[1],
-                                                                           theta))
+        for side, mask in enumerate(_HAND_MASKS):
+            theta = jnp.where(mask[:, None] > 0, sides[side], theta)
     fit_config = dataclasses.replace(FIT_FROM_IK, iterations=settings.fit_iterations)
     settled = state.shape_seconds >= settings.shape_settle
     fitted = fit_one(models.openpose, keypoints, theta, jnp.where(settled, state.shape, betas), None, lens,
