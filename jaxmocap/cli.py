@@ -5,11 +5,11 @@ import contextlib
 import functools
 import signal
 import sys
-import threading
 from pathlib import Path
 
 from jaxmocap.compile_cache import use_compilation_cache
 from jaxmocap.errors import InputError
+from jaxmocap.signals import handling
 
 
 @contextlib.contextmanager
@@ -17,22 +17,15 @@ def _sigterm_interrupts():
     """Inside, SIGTERM (``kill``, ``timeout``, a job scheduler or container stopping the command) raises
     KeyboardInterrupt where Ctrl-C would, so that it stops a command as cleanly (atomic writes rolled back, stored
     chunks kept, a batch's videos listed as stopped, a live session's recording written); the list yielded holds the
-    signal once it came, which tells the two apart. In the main thread only (elsewhere signals do not arrive); the
-    previous handler is restored after."""
+    signal once it came, which tells the two apart."""
     received = []
 
     def interrupt(signum, frame):
         received.append(signum)
         raise KeyboardInterrupt("SIGTERM")
 
-    if threading.current_thread() is not threading.main_thread():
+    with handling(interrupt, signal.SIGTERM):
         yield received
-        return
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield received
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _cmd_model(args):

@@ -129,6 +129,11 @@ def interrupted_at_chunk(monkeypatch, index: int, stop=_ctrl_c):
         monkeypatch.setattr(job, "solve_chunk", solve)
 
 
+def temporary_files(folder: Path) -> list[Path]:
+    """What an atomic write leaves behind if it is cut short (`smplx_jax.io.atomic_path`'s names)."""
+    return [p for p in folder.rglob(".*") if ".tmp" in p.name]
+
+
 def cli_as_from_a_terminal(*args: str, python_options: tuple[str, ...] = ()) -> list[str]:
     """The command line of ``jaxmocap ARGS`` that Ctrl-C (SIGINT) interrupts, as in a terminal. A background job
     (CI's, nohup's, a shell's ``cmd &``) inherits SIGINT ignored, its subprocesses too, and Python then leaves it

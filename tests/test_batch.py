@@ -23,7 +23,7 @@ import numpy as np
 import psutil
 import pytest
 
-from conftest import cli_as_from_a_terminal
+from conftest import cli_as_from_a_terminal, temporary_files
 from jaxmocap.batch import BatchConfig
 from jaxmocap.batch.ledger import STOPPED
 from jaxmocap.batch.videos import folder_names, read_manifest
@@ -57,11 +57,6 @@ def assert_motions_equal(path: Path, reference: Path) -> None:
 
 def files_with_times(folder: Path) -> dict[str, tuple[int, int]]:
     return {str(p.relative_to(folder)): (p.stat().st_mtime_ns, p.stat().st_size) for p in folder.rglob("*")}
-
-
-def temporary_files(folder: Path) -> list[Path]:
-    """What an atomic write leaves behind if it is cut short (`smplx_jax.io.atomic_path`'s names)."""
-    return [p for p in folder.rglob(".*") if ".tmp" in p.name]
 
 
 def wait_for(predicate, seconds: float, what: str):

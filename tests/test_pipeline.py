@@ -23,7 +23,7 @@ import jaxmocap.pipeline.job as pipeline_job
 import jaxmocap.pipeline.regress as regress_module
 import jaxmocap.pipeline.stages as stages_module
 import smplx_jax
-from conftest import assert_one_body, interrupted_at_chunk
+from conftest import assert_one_body, interrupted_at_chunk, temporary_files
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
 from jaxmocap.io import file_sha256
@@ -290,7 +290,7 @@ def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path, monkeypatch, capsys):
     assert code == 143
     assert capsys.readouterr().err == "jaxmocap run: terminated; run the same command again to resume\n"
     assert not (tmp_path / "motion.npz").exists() and len(list((tmp_path / ".jaxmocap_chunks").glob("*.npz"))) == 1
-    assert not [p for p in tmp_path.rglob(".*") if ".tmp" in p.name]
+    assert not temporary_files(tmp_path)
 
 
 def test_clip_without_people(tmp_path):

@@ -4,9 +4,9 @@ cluster's address. The only module of jaxmocap that imports Ray, an optional ext
 import logging
 import os
 import signal
-import threading
 
 from jaxmocap.errors import InputError
+from jaxmocap.signals import handling
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
 
@@ -37,8 +37,7 @@ def connect(address: str | None, workers: int | None):
     if on_this_machine(address) and ray._private.ray_constants.ENABLE_RAY_CLUSTER:
         raise RuntimeError("Ray was imported before jaxmocap could keep it on 127.0.0.1: run batch in a new process")
     quiet = dict(log_to_driver=False, logging_level=logging.ERROR)  # Ray's notes are not the batch's
-    sigterm = signal.getsignal(signal.SIGTERM)
-    try:
+    with handling(None, signal.SIGTERM):  # ray.init sets its own (exit at once); the command's stops a batch cleanly
         if address is None:
             ray.init(num_cpus=workers or os.cpu_count() or 1, include_dashboard=False, **quiet)
         else:
@@ -46,7 +45,4 @@ def connect(address: str | None, workers: int | None):
                 ray.init(address=address, **quiet)
             except (ConnectionError, ValueError, RuntimeError) as err:
                 raise InputError(f"--address {address}: cannot join a Ray cluster there ({err})") from None
-    finally:  # ray.init sets its own SIGTERM handler (exit at once); the command's stops the batch cleanly
-        if threading.current_thread() is threading.main_thread() and sigterm is not None:
-            signal.signal(signal.SIGTERM, sigterm)
     return ray

@@ -7,8 +7,8 @@ viewer a fourth renders the overlay for the web page (`Viewer`). A stage that fa
 could not take (counted); a file played as fast as it can be (no ``realtime``) drops nothing.
 """
 
-import contextlib
 import dataclasses
+import functools
 import signal
 import sys
 import threading
@@ -36,6 +36,7 @@ from jaxmocap.overlay import Posed, people_over_frame
 from jaxmocap.pipeline.config import MODES
 from jaxmocap.pipeline.observe import Observations, observe_people
 from jaxmocap.pipeline.stages import lens_of
+from jaxmocap.signals import handling
 
 
 @dataclass(frozen=True)
@@ -271,16 +272,5 @@ class Session:
                           written)
 
 
-@contextlib.contextmanager
-def _sheltered():
-    """Ctrl-C and SIGTERM ignored inside (in the main thread; elsewhere signals do not arrive)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+_sheltered = functools.partial(handling, signal.SIG_IGN, signal.SIGINT, signal.SIGTERM)  # Ctrl-C and SIGTERM ignored
 
