@@ -740,3 +740,40 @@ def test_the_twist_of_a_rotation_about_an_axis_is_recovered_up_to_half_a_turn():
             assert abs(_twist_angle(rotmat, axis) - twist) < 1e-12
     for axis in np.eye(3):
         assert abs(abs(_twist_angle(rodrigues(axis * np.pi), axis)) - np.pi) < 1e-12
+
+
+def test_a_frame_caught_between_two_turns_joins_a_side_and_a_lasting_switch_stays():
+    """`bridged` on the left arm raised forward (A) in frames 0-3 and back (B) in frames 5-7, frame 4 between them
+    raised sideways (more than 45 degrees from both: two turns). Fitted again from a neighbour (a stand-in ``refit``
+    giving that neighbour's pose and an error), frame 4 adds 0.1 px for the turn it removes: it joins a side, one
+    turn is left, and no other frame changes. Where each refit adds 2 px (the image shows each frame's own pose:
+    both turns stay), or frame 4 is already B (one switch, which a bridge would only move), nothing changes, even
+    where the refits reproject 0.5 px closer than the fits (the `coherent` module's docstring says why)."""
+    from jaxmocap.pipeline import Bodies
+    from jaxmocap.pipeline.coherent import TURN_DEG, body_rotmats, bridged, turns_deg
+
+    def bodies_of(shoulders):
+        params = jax.tree.map(lambda a: np.repeat(np.asarray(a)[None], FRAMES, 0), smplx_jax.SMPLXParams.zeros())
+        params.body_pose[:, 15] = shoulders
+        return Bodies(params, np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool))
+
+    forward, back, side = (0.0, 1.05, 0.0), (0.0, -1.05, 0.0), (0.0, 0.0, 1.2)
+    frames, errors = list(range(FRAMES)), np.full(FRAMES, 5.0)
+    for name, middle, added, changed in (("caught", side, 0.1, True), ("shown", side, 2.0, False),
+                                         ("one switch", back, 0.1, False), ("closer", back, -0.5, False)):
+        bodies = bodies_of([forward] * 4 + [middle] + [back] * 3)
+
+        def refit(trial, k, neighbour, turned, added=added):
+            assert turned[16] and turned.sum() == 1
+            return jax.tree.map(lambda a: a[neighbour:neighbour + 1], trial), errors[k] + added, 0.0
+
+        rotmats = body_rotmats(bodies.params.global_orient, bodies.params.body_pose)
+        before = (turns_deg(rotmats[:-1], rotmats[1:]) > TURN_DEG).sum(1)
+        out = bridged(bodies, rotmats, frames, errors, refit)
+        out_rotmats = body_rotmats(out.params.global_orient, out.params.body_pose)
+        after = (turns_deg(out_rotmats[:-1], out_rotmats[1:]) > TURN_DEG).sum(1)
+        assert before.sum() == (2 if middle == side else 1), name  # (the switch 4 frames from either end)
+        assert after.sum() == (1 if changed else before.sum()), (name, after)
+        kept = np.arange(FRAMES) != 4
+        np.testing.assert_array_equal(out.params.body_pose[kept], bodies.params.body_pose[kept], err_msg=name)
+        assert np.array_equal(out.params.body_pose[4], bodies.params.body_pose[4]) != changed, name
