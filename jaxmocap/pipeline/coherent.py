@@ -178,9 +178,9 @@ def _refit(km, keypoints, pose, betas, free, lens, config: FitConfig) -> FitResu
 
 def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens, config: FitConfig | None,
              iterations: int = 20) -> Bodies:
-    """``bodies`` with each frame across a turn of more than `TURN_DEG` fitted again from its neighbour (module
-    docstring); ``lens`` the run's pinhole camera, ``config`` the fit's (None, as after copy-and-paste: unchanged).
-    Each refit is one compiled call on one frame (`_refit`)."""
+    """``bodies`` with each frame across a turn of more than `TURN_DEG` fitted again from its neighbour, then the
+    turns left `bridged` (module docstring); ``lens`` the run's pinhole camera, ``config`` the fit's (None, as after
+    copy-and-paste: unchanged). Each refit is one compiled call on one frame (`_refit`)."""
     frames = np.flatnonzero(bodies.valid).tolist()
     if config is None or len(frames) < 2:
         return bodies
