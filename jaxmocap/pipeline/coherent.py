@@ -203,14 +203,14 @@ def coherent(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarra
         if not turned.any():
             continue
         one, error, tie = refit(out, k, neighbour, turned)
-        if one is not None and error <= errors[k] + tie:
+        if one is not None and error <= errors[k] + tie:  # (each frame is refitted once here: errors[k] is its own)
             out, rotmats[k] = _with_frame(out, k, one), body_rotmats(one.params.global_orient, one.params.body_pose)[0]
+            errors[k] = error
         else:  # the frame keeps its fit, with the turned bones' twists the neighbour's (no keypoint moves)
             handed = untwisted(rotmats[k], rotmats[neighbour], axes, turned)
             if not np.array_equal(handed, rotmats[k]):  # a bone handed its twist on
                 rotmats[k], out = handed, _with_body_rotations(out, k, handed)
-    errors = reprojection_errors(model, out.params, out.camera_scale, out.camera_trans, keypoints_2d, *lens)
-    return bridged(out, rotmats, frames, errors, refit)
+    return bridged(out, rotmats, frames, errors, refit)  # (a frame given twists kept its error: no keypoint moved)
 
 
 def _refit_from(model, keypoints_2d, lens, km, fit_lens, config, bodies: Bodies, k: int, neighbour: int,
