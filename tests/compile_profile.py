@@ -3,7 +3,7 @@ per test and per program (``jax.monitoring``'s events), in this process and each
 the largest at the end. Subprocesses a test starts (the CLI, Ray, 4 forced devices) are not seen: their time is
 the test's time less what is listed.
 
-    .venv/bin/python -m pytest -q -n 2 --dist loadfile -p compile_profile --durations=0
+    PYTHONPATH=tests .venv/bin/python -m pytest -q -n 2 --dist loadfile -p compile_profile --durations=0
 """
 
 import collections
