@@ -9,8 +9,6 @@ the test's time less what is listed.
 import collections
 import json
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import jax.monitoring
@@ -33,10 +31,13 @@ def _record(event: str, seconds: float, **fields) -> None:
         _calls[key] += 1
 
 
+def _folder() -> Path:
+    """Inside the run's folder that tests/conftest.py names for all workers and removes at the end."""
+    return Path(os.environ["JAXMOCAP_TEST_CACHE"]) / "compile_profile"
+
+
 def pytest_configure(config):
     jax.monitoring.register_event_duration_secs_listener(_record)
-    if not hasattr(config, "workerinput"):  # the controller names the folder the workers write to
-        os.environ["JAXMOCAP_COMPILE_PROFILE"] = tempfile.mkdtemp(prefix="jaxmocap-compile-profile-")
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -49,13 +50,14 @@ def pytest_runtest_protocol(item, nextitem):
 def pytest_sessionfinish(session):
     rows = [[*key, seconds, _calls[key]] for key, seconds in _seconds.items()]
     name = getattr(session.config, "workerinput", {}).get("workerid", "main")
-    (Path(os.environ["JAXMOCAP_COMPILE_PROFILE"]) / f"{name}.json").write_text(json.dumps(rows))
+    _folder().mkdir(exist_ok=True)
+    (_folder() / f"{name}.json").write_text(json.dumps(rows))
 
 
 def pytest_terminal_summary(terminalreporter, config):
     if hasattr(config, "workerinput"):
         return
-    rows = [row for path in Path(os.environ["JAXMOCAP_COMPILE_PROFILE"]).glob("*.json")
+    rows = [row for path in _folder().glob("*.json")
             for row in json.loads(path.read_text())]
     by_stage, by_test, by_program = collections.Counter(), collections.Counter(), collections.Counter()
     programs = collections.Counter()
@@ -75,7 +77,3 @@ def pytest_terminal_summary(terminalreporter, config):
     for program, seconds in by_program.most_common(SHOWN):
         write(f"{seconds:8.1f} {programs[program]:5d}  {program}")
 
-
-def pytest_unconfigure(config):
-    if not hasattr(config, "workerinput"):
-        shutil.rmtree(os.environ.pop("JAXMOCAP_COMPILE_PROFILE"), ignore_errors=True)
