@@ -1,17 +1,228 @@
-"""The on-disk cache of XLA's compiled programs that every jaxmocap process shares (``jaxmocap run``, each worker
-of ``jaxmocap batch``): a program compiled once, by any of them, is read back by the others."""
+"""The on-disk caches that every jaxmocap process shares (``jaxmocap run``, each worker of ``jaxmocap batch``,
+``jaxmocap live``): XLA's compiled programs, and the run's large programs as lowered by JAX (`jax.export`), so
+that a program one process traced, lowered and compiled is read back by the others instead."""
+
+import dataclasses
+import functools
+import hashlib
+import importlib
+import importlib.metadata
+import inspect
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import jax
+
+PROGRAMS_KEPT = 256  # lowered programs on disk at most (least recently used out): some 0.1-1 MB each
+_TRACED_THROUGH = ("jax", "jaxlib", "equinox", "lineax", "optimistix")  # whose code the programs hold
+_programs: list[Path | None] = [None]  # where lowered programs live, once `use_compilation_cache` said so
 
 
 def use_compilation_cache() -> None:
     """Keep XLA's compiled programs on disk (``$JAXMOCAP_CACHE/xla``, at most 1 GiB, least recently used out), so
     that a second run skips the compilation (docs/BENCHMARKS.md, "End to end"): every program, the small ones too
     (a run's ~140 programs under 0.5 s took 3-4 s to compile again in each run). ``JAX_COMPILATION_CACHE_DIR``
-    takes precedence."""
-    import jax
-
+    takes precedence. The `disk_jit` programs go into its folder ``jaxmocap-programs``."""
     from smplx_jax.default_model import cache_root
 
     if jax.config.jax_compilation_cache_dir is None:
         jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_compilation_cache_max_size", 1 << 30)
+    _programs[0] = Path(jax.config.jax_compilation_cache_dir) / "jaxmocap-programs"
+
+
+def disk_jit(fun=None, *, static_argnames: tuple[str, ...] | str = ()):
+    """`jax.jit` whose lowered programs are also kept on disk (after `use_compilation_cache`): a new process that
+    calls ``fun`` with arguments of the same structure, shapes and dtypes (and equal static ones) reads the
+    program back in a fraction of a second instead of tracing and lowering it again (1-4 s for each of a run's
+    large programs). Keyed by the function, its static arguments, its other arguments' tree, shapes and dtypes,
+    JAX's tracing settings, the platform it runs on (the arguments' device: the live solve's CPU beside a GPU),
+    the versions of the libraries traced through and the source of jaxmocap and smplx_jax: anything else that a
+    program depends on (a module's constant) must live in those sources. Calls under a transformation, with
+    several devices, before `use_compilation_cache` or with trees that cannot be written are the plain
+    `jax.jit`."""
+    if fun is None:
+        return functools.partial(disk_jit, static_argnames=static_argnames)
+    return _DiskJit(fun, (static_argnames,) if isinstance(static_argnames, str) else tuple(static_argnames))
+
+
+class _DiskJit:
+    def __init__(self, fun, static_argnames: tuple[str, ...]):
+        self.fun, self.static_argnames = fun, static_argnames
+        self.jitted = jax.jit(fun, static_argnames=static_argnames)
+        self.signature = inspect.signature(fun)
+        self.programs = {}  # (static values, tree, avals, platform, settings) -> the program's call, or None
+        functools.update_wrapper(self, fun)
+
+    def __call__(self, *args, **kwargs):
+        if _programs[0] is None or jax.device_count() > 1:
+            return self.jitted(*args, **kwargs)
+        bound = self.signature.bind(*args, **kwargs)
+        bound.apply_defaults()
+        static = tuple((k, v) for k, v in bound.arguments.items() if k in self.static_argnames)
+        dynamic = {k: v for k, v in bound.arguments.items() if k not in self.static_argnames}
+        leaves, tree = jax.tree.flatten(dynamic)
+        platform = _platform(leaves)
+        if platform is None:
+            return self.jitted(*args, **kwargs)
+        avals = tuple((jax.numpy.shape(x), jax.numpy.result_type(x), _weak(x)) for x in leaves)
+        key = (static, tree, avals, platform, _settings())
+        if key not in self.programs:
+            self.programs[key] = self._load_or_export(static, dynamic, key)
+        program = self.programs[key]
+        return self.jitted(*args, **kwargs) if program is None else program(dynamic)
+
+    def _cache_size(self) -> int:
+        """Programs this process holds (as `jax.jit`'s: a second call with the same shapes adds none)."""
+        return len(self.programs) + self.jitted._cache_size()
+
+    def _load_or_export(self, static, dynamic, key):
+        name = f"{self.fun.__module__}.{self.fun.__qualname__}"
+        identity = repr((name, *key, _versions_and_sources()))
+        path = _programs[0] / f"{hashlib.sha256(identity.encode()).hexdigest()[:40]}.jaxexport"
+        exported = _read(path)
+        if exported is None:
+            try:
+                exported = jax.export.export(jax.jit(functools.partial(self.fun, **dict(static))),
+                                             platforms=(key[3],))(**dynamic)
+                _register(exported.in_tree, exported.out_tree)
+                blob = exported.serialize()
+                if not _round_trips(exported, blob):
+                    return None
+            except (TypeError, ValueError, NotImplementedError):  # effects, trees that cannot be written
+                return None
+            _write(path, _node_types(exported.in_tree, exported.out_tree), blob)
+        return jax.jit(lambda dynamic: exported.call(**dynamic))
+
+
+def _platform(leaves) -> str | None:
+    """The platform the call runs on: that of the device its committed arrays are on, else JAX's default; None
+    under a transformation (tracers) or across devices."""
+    devices = set()
+    for leaf in leaves:
+        if isinstance(leaf, jax.core.Tracer):
+            return None
+        if isinstance(leaf, jax.Array) and leaf.committed:
+            devices |= leaf.devices()
+    if len(devices) > 1:
+        return None
+    device = devices.pop() if devices else None
+    if device is None or device.platform == jax.default_backend():
+        return jax.export.default_export_platform()
+    return "cpu" if device.platform == "cpu" else None  # the host beside an accelerator
+
+
+def _weak(x) -> bool:
+    return bool(getattr(x, "weak_type", False)) or isinstance(x, (bool, int, float, complex))
+
+
+def _settings() -> tuple:
+    """JAX's settings that change what a trace gives."""
+    config = jax.config
+    return (config.jax_enable_x64, config.jax_default_matmul_precision, config.jax_numpy_dtype_promotion,
+            config.jax_numpy_rank_promotion)
+
+
+@functools.cache
+def _versions_and_sources() -> str:
+    digest = hashlib.sha256()
+    for package in _TRACED_THROUGH:
+        digest.update(f"{package}=={importlib.metadata.version(package)};".encode())
+    for package in ("jaxmocap", "smplx_jax"):
+        root = Path(importlib.import_module(package).__file__).parent
+        for source in sorted(root.rglob("*.py")):
+            digest.update(str(source.relative_to(root)).encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()
+
+
+# --- the files: a JSON line naming the node types of the trees in and out, then the serialized program ---
+
+_OURS = ("jaxmocap.", "smplx_jax.")  # the packages whose tree node types a file may name (imported to register)
+
+
+def _read(path: Path):
+    try:
+        header, blob = path.read_bytes().split(b"\n", 1)
+        for module, qualname in json.loads(header):
+            if not module.startswith(_OURS):
+                return None
+            cls = importlib.import_module(module)
+            for part in qualname.split("."):
+                cls = getattr(cls, part)
+            _register_type(cls)
+        exported = jax.export.deserialize(bytearray(blob))
+        os.utime(path)  # recently used
+        return exported
+    except (OSError, ValueError, TypeError, AttributeError, ImportError):  # none yet, or unreadable: export anew
+        return None
+
+
+def _write(path: Path, node_types: list, blob: bytearray) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".tmp", delete=False) as f:
+            f.write(json.dumps(node_types).encode() + b"\n" + bytes(blob))
+        os.replace(f.name, path)
+        kept = sorted(path.parent.glob("*.jaxexport"), key=lambda p: p.stat().st_mtime)
+        for old in kept[:-PROGRAMS_KEPT]:
+            old.unlink(missing_ok=True)
+    except OSError:  # a read-only or full disk: the next process lowers again
+        pass
+
+
+def _round_trips(exported, blob) -> bool:
+    again = jax.export.deserialize(blob)
+    return again.in_tree == exported.in_tree and again.out_tree == exported.out_tree
+
+
+# --- tree node types, registered for `jax.export` under their module and name, their static data as JSON ---
+
+_registered: set[type] = set()
+_BUILT_IN = (tuple, list, dict, type(None))
+
+
+def _node_types(*trees) -> list[tuple[str, str]]:
+    found, todo = [], list(trees)
+    while todo:
+        node = todo.pop()
+        data = node.node_data()
+        if data is not None and data[0] not in _BUILT_IN and data[0].__module__.startswith(_OURS):
+            found.append((data[0].__module__, data[0].__qualname__))
+        todo += node.children()
+    return sorted(set(found))
+
+
+def _register(*trees) -> None:
+    for tree in trees:
+        todo = [tree]
+        while todo:
+            node = todo.pop()
+            data = node.node_data()
+            if data is not None and data[0] not in _BUILT_IN:
+                if not data[0].__module__.startswith(_OURS):
+                    raise TypeError(f"cannot write a tree holding {data[0]}")
+                _register_type(data[0])
+            todo += node.children()
+
+
+def _register_type(cls: type) -> None:
+    if cls in _registered:
+        return
+    name = f"jaxmocap:{cls.__module__}.{cls.__qualname__}"
+    if issubclass(cls, tuple) and hasattr(cls, "_fields"):
+        jax.export.register_namedtuple_serialization(cls, serialized_name=name)
+    elif dataclasses.is_dataclass(cls):
+        jax.export.register_pytree_node_serialization(
+            cls, serialized_name=name, serialize_auxdata=lambda aux: json.dumps(aux).encode(),
+            deserialize_auxdata=lambda data: _tuples(json.loads(data)))
+    else:
+        raise TypeError(f"cannot write a tree holding {cls}")
+    _registered.add(cls)
+
+
+def _tuples(value):
+    """JSON's lists back into the tuples they were."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value

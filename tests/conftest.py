@@ -27,9 +27,12 @@ sys.path.insert(0, str(Path(__file__).parent))
 def pytest_configure(config):
     """One on-disk cache of compiled programs for the whole run, new and empty (as on a new machine; not the
     user's ``~/.cache/jaxmocap/xla``), shared by pytest-xdist's workers and the subprocesses tests start, so that a
-    program one test compiled is read back by another (the suite's time is mostly XLA compiling). The controller
-    names it; the workers inherit its environment."""
+    program one test compiled is read back by another (the suite's time is mostly XLA compiling), and the lowered
+    programs of `jaxmocap.compile_cache.disk_jit` in it, as the CLI keeps them. The controller names it; the
+    workers inherit its environment."""
     import jax
+
+    from jaxmocap.compile_cache import use_compilation_cache
 
     if "JAXMOCAP_TEST_CACHE" not in os.environ or not hasattr(config, "workerinput"):
         os.environ["JAXMOCAP_TEST_CACHE"] = tempfile.mkdtemp(prefix="jaxmocap-tests-")
@@ -38,6 +41,7 @@ def pytest_configure(config):
     os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
     jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+    use_compilation_cache()
 
 
 # The files that take longest, longest first (`pytest --durations=0`, summed per file, 2026-11-26): the workers

@@ -26,6 +26,7 @@ import smplx_jax
 from conftest import assert_one_body, interrupted_at_chunk, temporary_files
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
+from jaxmocap.integrate import fitting, inverse_kinematics
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
 from jaxmocap.pipeline import Observations, RunConfig
@@ -61,6 +62,14 @@ def test_motion_schema_and_conventions(result):
     names = sorted(p.name for p in (out / "keypoints").iterdir())
     assert names[0] == "pose2sim_single_cam01_000000000020_keypoints.json" and len(names) == FRAMES
     assert not (out / ".jaxmocap_chunks").exists()
+
+
+def test_the_runs_programs_are_kept_for_the_next_process(result):
+    """Every `disk_jit` program of the run was written as it lowered (none fell back to a plain `jax.jit`), so a
+    new process (`jaxmocap run`, each `batch` worker) reads them back instead of tracing them again."""
+    functions = fitting._start_batch, fitting._advance_batch, fitting._result_batch, inverse_kinematics._ik_batch
+    held = {f.__qualname__: list(f.programs.values()) for f in functions}
+    assert [name for name, programs in held.items() if not programs or None in programs] == []
 
 
 def test_smplx_pytorch_reproduces_the_stored_projections(result):

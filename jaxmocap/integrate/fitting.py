@@ -27,6 +27,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from jaxmocap.batching import map_in_buckets
+from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.camera import weak_perspective_from_points, weak_perspective_least_squares
 from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, keypoints_cm, params_of
@@ -201,7 +202,7 @@ def _frames(fn, *args, in_axes=0):
         return jax.vmap(fn, in_axes=in_axes)(*args)
 
 
-@functools.partial(jax.jit, static_argnames=("config", "fixed_shape"))
+@disk_jit(static_argnames=("config", "fixed_shape"))
 def _start_batch(km, keypoints, pose, betas, camera, free, lens, config: FitConfig, fixed_shape: bool = False):
     """A batch's problems (``km`` left out: one for all), starts, start cameras and solver states."""
     fit_betas = jnp.zeros((), pose.dtype) if fixed_shape else None
@@ -213,13 +214,13 @@ def _start_batch(km, keypoints, pose, betas, camera, free, lens, config: FitConf
     return _frames(one, keypoints, pose, betas, camera, free, in_axes=(0, 0, 0, None if camera is None else 0, 0))
 
 
-@functools.partial(jax.jit, static_argnames="config")
+@disk_jit(static_argnames="config")
 def _advance_batch(km, problem, y, state, steps, config: FitConfig):
     return _frames(lambda p, *rest: levenberg_marquardt.advance(p._replace(km=km), *rest, config=config),
                    problem, y, state, steps)
 
 
-@jax.jit
+@disk_jit
 def _result_batch(km, problem, start, camera, y, converged, steps):
     return _frames(lambda p, s, c, y, ok, n: _result(p._replace(km=km), s, c, y, ok, True, n), problem, start,
                    camera, y, converged, steps)

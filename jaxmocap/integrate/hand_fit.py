@@ -14,7 +14,6 @@ the origin) lands at pixel ``camera_scale * X[:2] + camera_trans``. Pure and jit
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import NamedTuple
 
 import jax
@@ -23,6 +22,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from jaxmocap.batching import map_in_buckets
+from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate.fitting import OK, FitConfig, fit_one
 from jaxmocap.integrate.inverse_kinematics import LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS, IKConfig, ik_one
 from jaxmocap.integrate.keypoints import KeypointModel, keypoint_model, keypoints_cm
@@ -140,7 +140,7 @@ def start_pose(side, global_orient, hand_pose):
     return jnp.zeros((55, 3), hand_pose.dtype).at[ids.wrist].set(global_orient).at[ids.fingers].set(hand_pose)
 
 
-@functools.partial(jax.jit, static_argnames=("fit_config",))
+@disk_jit(static_argnames="fit_config")
 def _fit_batch(km, left, world, world_conf, keypoints, start, fit_config):
     def one(w, c, k, p):
         pose = hand_ik_one(km, left, w, c) if start is None else start_pose(left, *p)

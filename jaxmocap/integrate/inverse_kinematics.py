@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxmocap.batching import map_in_buckets
+from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.fitting import BUCKETS, default_pose
 from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
@@ -84,7 +85,7 @@ def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config, prio
             jnp.where(ok, cam, jnp.concatenate([jnp.ones(1, theta.dtype), offset])), ok)
 
 
-@functools.partial(jax.jit, static_argnames=("config",))
+@disk_jit(static_argnames="config")
 def _ik_batch(km, targets, conf, theta, betas, free_joints, fit_betas, config):
     # The masks are traced: body and hand IK (both 21 keypoints) share one compiled solver.
     one = functools.partial(ik_one, free_joints=free_joints, fit_betas=fit_betas, config=config)

@@ -295,7 +295,7 @@ def cost_of(y: Unknowns, problem: Problem, config: SolverConfig):
     return 0.5 * sum(jnp.sum(part * part) for part in residuals(y, problem, config))
 
 
-class _State(eqx.Module):
+class _State(NamedTuple):
     cost: Float[Array, ""]  # at the current point
     damping: Float[Array, ""]  # Marquardt's mu
     growth: Float[Array, ""]  # Nielsen's factor for mu after a rejected step

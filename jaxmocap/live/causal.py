@@ -4,7 +4,6 @@ iterations of the fit to the 2D keypoints, then the One-Euro filter; one compile
 (`step`), on the host's CPU (`host`)."""
 
 import dataclasses
-import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -14,6 +13,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 import smplx_jax
+from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate.fitting import OK, default_pose, fit_one, lens_arrays, openpose_keypoint_model
 from jaxmocap.integrate.inverse_kinematics import (
     BLAZEPOSE_JOINTS,
@@ -105,7 +105,7 @@ _BODY_MASK = jnp.asarray(BODY_IK_JOINTS, jnp.float32)
 _HAND_MASKS = jnp.asarray([LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS], jnp.float32)  # (2, 55)
 
 
-@functools.partial(jax.jit, static_argnames=("num_expression", "settings"))
+@disk_jit(static_argnames=("num_expression", "settings"))
 def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""], dt: Float[Array, ""], lens: tuple,
          num_expression: int, settings: LiveSettings) -> tuple[Solved, PersonState]:
     """One person's frame: ``obs`` = (BlazePose world landmarks (33, 4), hand world landmarks (2, 21, 3), hand

@@ -6,7 +6,6 @@ previous frame, a few iterations of the fit to its 2D keypoints, the One-Euro fi
 from __future__ import annotations
 
 import dataclasses
-import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -17,6 +16,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 import smplx_jax
+from jaxmocap.compile_cache import disk_jit
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.hand_tracker import SIDES, Hand, HandTracker
 from jaxmocap.hand_motion import hand_meshes, write_hands
@@ -54,7 +54,7 @@ class HandState(NamedTuple):
     camera: Filtered  # (1, 3): scale, tx, ty
 
 
-@functools.partial(jax.jit, static_argnames=("settings",))
+@disk_jit(static_argnames="settings")
 def hand_step(km: KeypointModel, left: Bool[Array, ""], world: Float[Array, "21 3"], keypoints: Float[Array, "21 3"],
               state: HandState, fresh: Bool[Array, ""], dt: Float[Array, ""], settings: HandSettings
               ) -> tuple[HandFit, HandState]:

@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
+from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import FitConfig, FitResult
 from jaxmocap.integrate.fitting import fit_one, lens_arrays, openpose_keypoint_model
 from jaxmocap.integrate.motion_arrays import reprojection_errors
@@ -168,7 +169,7 @@ def _start(params: smplx_jax.SMPLXParams, k: int, neighbour: int, turned: np.nda
     return one, free, WRIST_TIE_PX
 
 
-@functools.partial(jax.jit, static_argnames="config")
+@disk_jit(static_argnames="config")
 def _refit(km, keypoints, pose, betas, free, lens, config: FitConfig) -> FitResult:
     """One frame fitted again from ``pose (55, 3)`` with its shape ``betas`` held, in one compiled call (the
     refits run one after another, each from its neighbour's outcome)."""
