@@ -31,7 +31,12 @@ def use_compilation_cache() -> None:
         jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_compilation_cache_max_size", 1 << 30)
-    _programs[0] = Path(jax.config.jax_compilation_cache_dir) / "jaxmocap-programs"
+    keep_lowered_programs(Path(jax.config.jax_compilation_cache_dir) / "jaxmocap-programs")
+
+
+def keep_lowered_programs(folder: Path | None) -> None:
+    """Where `disk_jit` keeps its lowered programs from now on (None: nowhere, the plain `jax.jit`)."""
+    _programs[0] = folder
 
 
 def disk_jit(fun=None, *, static_argnames: tuple[str, ...] | str = ()):

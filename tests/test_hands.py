@@ -14,9 +14,11 @@ import smplx
 import torch
 
 import smplx_jax
+from conftest import assert_kept_for_the_next_process, programs_kept
 from jaxmocap.cli import main
 from jaxmocap.detect.hand_tracker import HandTracker
 from jaxmocap.hand_motion import hand_meshes, read_hands
+from jaxmocap.integrate import hand_fit
 from jaxmocap.integrate.hand_fit import fit_hands
 from jaxmocap.pipeline import RunConfig, run
 from smplx_jax import constants
@@ -143,7 +145,8 @@ def test_no_hand_is_not_valid_and_exits_0(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
     out = tmp_path_factory.mktemp("video")
-    report = run(RunConfig(CLIP, mode="hands", end=32, chunk_size=16, progress=False), out)
+    with programs_kept():
+        report = run(RunConfig(CLIP, mode="hands", end=32, chunk_size=16, progress=False), out)
     return out, report, read_hands(out / "hands.npz")
 
 
@@ -157,6 +160,7 @@ def test_close_up_video_is_tracked_and_fitted_within_3_percent(video):
     errors = hands["right_reprojection_error_px"][valid] / box_size(hands["right_keypoints_2d"][valid])
     assert np.median(errors) <= 0.03 and np.all(np.isfinite(hands["right_hand_pose"]))
     assert len(list((out / "keypoints").glob("*.json"))) == 32 and (out / "overlay.mp4").stat().st_size > 0
+    assert_kept_for_the_next_process(hand_fit._fit_batch)
 
 
 def test_interrupted_hands_run_resumes_to_the_same_hands(video, tmp_path, monkeypatch):
@@ -232,13 +236,15 @@ def test_live_hands_streams_and_records_each_hand(video, tmp_path):
     """``live --mode hands`` on the close-up clip, played as fast as solved: each frame solved, its hands sent over
     UDP and recorded; the recording agrees with the offline run (within a few pixels: causal filters)."""
     from jaxmocap.live import LiveConfig, live
+    from jaxmocap.live.hands import hand_step
 
     _, _, offline = video
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
     receiver.settimeout(0.5)
-    report = live(LiveConfig(CLIP, mode="hands", max_frames=32, record=tmp_path, udp=receiver.getsockname(),
-                             progress=False))
+    with programs_kept():
+        report = live(LiveConfig(CLIP, mode="hands", max_frames=32, record=tmp_path, udp=receiver.getsockname(),
+                                 progress=False))
     messages = []
     with receiver:
         try:
@@ -248,6 +254,7 @@ def test_live_hands_streams_and_records_each_hand(video, tmp_path):
             pass
     recorded = read_hands(tmp_path / "hands.npz")
     assert report.solved == 32 and np.array_equal(recorded["frame_index"], np.arange(32))
+    assert_kept_for_the_next_process(hand_step)
     valid = recorded["right_valid"]
     assert valid.sum() >= 20 and np.median(recorded["right_reprojection_error_px"][valid]) <= 0.03 * np.median(
         box_size(recorded["right_keypoints_2d"][valid]))

@@ -22,10 +22,10 @@ import pytest
 
 import smplx_jax
 from bench import live as live_bench
-from conftest import assert_one_body, cli_as_from_a_terminal
+from conftest import assert_kept_for_the_next_process, assert_one_body, cli_as_from_a_terminal, programs_kept
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import MediaError
-from jaxmocap.live import LiveConfig, live, params_from_message
+from jaxmocap.live import LiveConfig, causal, live, params_from_message
 from jaxmocap.live.causal import CausalSolver
 from jaxmocap.live.mailbox import Closed, Mailbox
 from jaxmocap.live.one_euro import OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
@@ -192,7 +192,8 @@ def played(tmp_path_factory):
 
     thread = threading.Thread(target=receive)
     thread.start()
-    report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False))
+    with programs_kept():
+        report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False))
     time.sleep(0.3)
     done.set()
     thread.join()
@@ -205,6 +206,7 @@ def test_every_frame_is_solved_when_played_as_fast_as_solved(played):
     assert report.stopped == "end of stream" and report.read == report.solved == 100 and report.dropped == 0
     assert motion["valid"].sum() >= 98 and np.array_equal(motion["frame_index"], np.arange(100))
     assert np.median(motion["reprojection_error_px"][motion["valid"]]) < 15.0
+    assert_kept_for_the_next_process(causal.step)
 
 
 def test_the_shape_settles_in_the_first_second_then_stays(played):

@@ -23,7 +23,13 @@ import jaxmocap.pipeline.job as pipeline_job
 import jaxmocap.pipeline.regress as regress_module
 import jaxmocap.pipeline.stages as stages_module
 import smplx_jax
-from conftest import assert_one_body, interrupted_at_chunk, temporary_files
+from conftest import (
+    assert_kept_for_the_next_process,
+    assert_one_body,
+    interrupted_at_chunk,
+    programs_kept,
+    temporary_files,
+)
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
 from jaxmocap.integrate import fitting, inverse_kinematics
@@ -46,8 +52,9 @@ def run(source, out, **options):
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    report = run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
-                 progress=False, frankmocap_pkl=True, save_frames=True)
+    with programs_kept():
+        report = run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
+                     progress=False, frankmocap_pkl=True, save_frames=True)
     return out, report
 
 
@@ -65,11 +72,8 @@ def test_motion_schema_and_conventions(result):
 
 
 def test_the_runs_programs_are_kept_for_the_next_process(result):
-    """Every `disk_jit` program of the run was written as it lowered (none fell back to a plain `jax.jit`), so a
-    new process (`jaxmocap run`, each `batch` worker) reads them back instead of tracing them again."""
-    functions = fitting._start_batch, fitting._advance_batch, fitting._result_batch, inverse_kinematics._ik_batch
-    held = {f.__qualname__: list(f.programs.values()) for f in functions}
-    assert [name for name, programs in held.items() if not programs or None in programs] == []
+    assert_kept_for_the_next_process(fitting._start_batch, fitting._advance_batch, fitting._result_batch,
+                                     inverse_kinematics._ik_batch)
 
 
 def test_smplx_pytorch_reproduces_the_stored_projections(result):
