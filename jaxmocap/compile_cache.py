@@ -15,9 +15,9 @@ from pathlib import Path
 
 import jax
 
-PROGRAMS_KEPT = 256  # lowered programs on disk at most (least recently used out): some 0.1-1 MB each
+PROGRAMS_KEPT = 256  # lowered programs on disk at most (least recently used out): some 40-150 kB each
 _TRACED_THROUGH = ("jax", "jaxlib", "equinox", "lineax", "optimistix")  # whose code the programs hold
-_programs: list[Path | None] = [None]  # where lowered programs live, once `use_compilation_cache` said so
+_programs: list[Path | None] = [None]  # where lowered programs live (`keep_lowered_programs`)
 
 
 def use_compilation_cache() -> None:
@@ -55,6 +55,8 @@ def disk_jit(fun=None, *, static_argnames: tuple[str, ...] | str = ()):
 
 
 class _DiskJit:
+    """`disk_jit`'s function: its programs in memory, each read from or written to disk at its first call."""
+
     def __init__(self, fun, static_argnames: tuple[str, ...]):
         self.fun, self.static_argnames = fun, static_argnames
         self.jitted = jax.jit(fun, static_argnames=static_argnames)
@@ -93,13 +95,15 @@ class _DiskJit:
             try:
                 exported = jax.export.export(jax.jit(functools.partial(self.fun, **dict(static))),
                                              platforms=(key[3],))(**dynamic)
-                _register(exported.in_tree, exported.out_tree)
+                types = _custom_types(exported.in_tree, exported.out_tree)
+                for cls in types:
+                    _register_type(cls)
                 blob = exported.serialize()
                 if not _round_trips(exported, blob):
                     return None
             except (TypeError, ValueError, NotImplementedError):  # effects, trees that cannot be written
                 return None
-            _write(path, _node_types(exported.in_tree, exported.out_tree), blob)
+            _write(path, sorted((cls.__module__, cls.__qualname__) for cls in types), blob)
         return jax.jit(lambda dynamic: exported.call(**dynamic))
 
 
@@ -189,33 +193,23 @@ _registered: set[type] = set()
 _BUILT_IN = (tuple, list, dict, type(None))
 
 
-def _node_types(*trees) -> list[tuple[str, str]]:
-    found, todo = [], list(trees)
+def _custom_types(*trees) -> set[type]:
+    """The node types of ``trees`` other than tuples, lists, dicts and None."""
+    found, todo = set(), list(trees)
     while todo:
         node = todo.pop()
         data = node.node_data()
-        if data is not None and data[0] not in _BUILT_IN and data[0].__module__.startswith(_OURS):
-            found.append((data[0].__module__, data[0].__qualname__))
+        if data is not None and data[0] not in _BUILT_IN:
+            found.add(data[0])
         todo += node.children()
-    return sorted(set(found))
-
-
-def _register(*trees) -> None:
-    for tree in trees:
-        todo = [tree]
-        while todo:
-            node = todo.pop()
-            data = node.node_data()
-            if data is not None and data[0] not in _BUILT_IN:
-                if not data[0].__module__.startswith(_OURS):
-                    raise TypeError(f"cannot write a tree holding {data[0]}")
-                _register_type(data[0])
-            todo += node.children()
+    return found
 
 
 def _register_type(cls: type) -> None:
     if cls in _registered:
         return
+    if not cls.__module__.startswith(_OURS):
+        raise TypeError(f"cannot write a tree holding {cls}")
     name = f"jaxmocap:{cls.__module__}.{cls.__qualname__}"
     if issubclass(cls, tuple) and hasattr(cls, "_fields"):
         jax.export.register_namedtuple_serialization(cls, serialized_name=name)
