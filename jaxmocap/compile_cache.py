@@ -40,14 +40,14 @@ def keep_lowered_programs(folder: Path | None) -> None:
 
 
 def disk_jit(fun=None, *, static_argnames: tuple[str, ...] | str = ()):
-    """`jax.jit` whose lowered programs are also kept on disk (after `use_compilation_cache`): a new process that
-    calls ``fun`` with arguments of the same structure, shapes and dtypes (and equal static ones) reads the
-    program back in a fraction of a second instead of tracing and lowering it again (1-4 s for each of a run's
-    large programs). Keyed by the function, its static arguments, its other arguments' tree, shapes and dtypes,
-    JAX's tracing settings, the platform it runs on (the arguments' device: the live solve's CPU beside a GPU),
-    the versions of the libraries traced through and the source of jaxmocap and smplx_jax: anything else that a
-    program depends on (a module's constant) must live in those sources. Calls under a transformation, with
-    several devices, before `use_compilation_cache` or with trees that cannot be written are the plain
+    """`jax.jit` whose lowered programs are also kept on disk (once `use_compilation_cache` or `keep_lowered_programs`
+    named the folder): a new process that calls ``fun`` with arguments of the same structure, shapes and dtypes (and
+    equal static ones) reads the program back in a fraction of a second instead of tracing and lowering it again
+    (1-4 s for each of a run's large programs). Keyed by the function, its static arguments, its other arguments'
+    tree, shapes and dtypes, JAX's tracing settings, the platform it runs on (the arguments' device: the live
+    solve's CPU beside a GPU), the versions of the libraries traced through and the source of jaxmocap and
+    smplx_jax: anything else that a program depends on (a module's constant) must live in those sources. Calls under
+    a transformation, with several devices, with no folder named or with trees that cannot be written are the plain
     `jax.jit`."""
     if fun is None:
         return functools.partial(disk_jit, static_argnames=static_argnames)

@@ -196,9 +196,9 @@ def programs_kept():
     CLI in the tests' subprocesses keeps and reads them (`jaxmocap run` of the bundled clip's frames 20-28, the
     shapes of `test_pipeline`'s run, in `test_batch`'s workers). Elsewhere the workers leave it off: exporting
     each program costs its first call some 10-20% more (docs/BENCHMARKS.md), for a program no other process needs."""
-    from jaxmocap.compile_cache import keep_lowered_programs
+    from jaxmocap.compile_cache import keep_lowered_programs, use_compilation_cache
 
-    keep_lowered_programs(Path(os.environ["JAX_COMPILATION_CACHE_DIR"]) / "jaxmocap-programs")
+    use_compilation_cache()  # (XLA's cache is already the run's: only its folder for lowered programs is set)
     try:
         yield
     finally:
