@@ -73,8 +73,37 @@ def load_model(path, *, num_betas: int = 10, num_expression: int = 10, dtype=jnp
 
     Shape columns are chosen as the ``smplx`` package does: a 400-column file has 300 shape then 100
     expression columns, a smaller one 10 and 10. Raises `ModelFileError` naming the file and the problem.
+    The process keeps the last few models loaded: the same file, unchanged (its size, modification time and inode),
+    with the same arguments, gives the same (immutable) `BodyModel` back without reading it again.
     """
     path = Path(path)
+    key = _file_key(path) + (num_betas, num_expression, jnp.dtype(dtype).name)
+    if key[0] is not None and key in _LOADED:
+        _LOADED[key] = _LOADED.pop(key)  # the most recently used last
+        return _LOADED[key]
+    model = _load(path, num_betas, num_expression, dtype)
+    if key[0] is not None:
+        _LOADED[key] = model
+        while len(_LOADED) > _KEEP:
+            del _LOADED[next(iter(_LOADED))]
+    return model
+
+
+_KEEP = 4  # models kept (a float32 model holds ~70 MB, a float64 one ~140 MB)
+_LOADED: dict[tuple, BodyModel] = {}
+
+
+def _file_key(path: Path) -> tuple:
+    """What says a file is the same one: its resolved path, device, inode, size and modification time (None when
+    it cannot be read; loading then raises)."""
+    try:
+        stat = path.stat()
+        return path.resolve(), stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns
+    except OSError:
+        return (None,)
+
+
+def _load(path: Path, num_betas: int, num_expression: int, dtype) -> BodyModel:
     arrays = read_model_file(path)
     shape_dim = SHAPE_SPACE_DIM if arrays["shapedirs"].shape[-1] >= 400 else 10
     expression_dim = arrays["shapedirs"].shape[-1] - shape_dim

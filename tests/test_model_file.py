@@ -150,3 +150,17 @@ def test_pkl_with_chumpy_expression_is_refused(tmp_path, arrays, monkeypatch):
 def test_default_model_loads(default_model_dir):
     model = load(default_model_dir)
     assert model.num_vertices == 10475 and model.num_betas == 10 and model.num_expression == 10
+
+
+def test_an_unchanged_file_is_loaded_once_and_a_rewritten_one_again(tmp_path, arrays):
+    path = _save(tmp_path, arrays)
+    first = smplx_jax.load_model(path)
+    assert smplx_jax.load_model(tmp_path / "." / path.name) is first  # the same file, named another way
+    assert smplx_jax.load_model(path, dtype=np.float64) is not first
+    assert smplx_jax.load_model(path, num_betas=8).num_betas == 8
+    path.unlink()
+    with pytest.raises(ModelNotFoundError):  # a file no longer there is not served from memory
+        smplx_jax.load_model(path)
+    moved = dict(arrays, v_template=arrays["v_template"] + 1.0)  # the same size, other values
+    _save(tmp_path, moved)
+    np.testing.assert_allclose(np.asarray(smplx_jax.load_model(path).v_template), moved["v_template"], rtol=1e-6)

@@ -2,6 +2,7 @@
 ``body.npz`` (one array per variable, named like the PyTorch checkpoints, read with ``allow_pickle=False``)."""
 
 import dataclasses
+import functools
 import json
 import zipfile
 from pathlib import Path
@@ -37,9 +38,7 @@ def variable_names(module: nnx.Module) -> dict[str, tuple[int, ...]]:
 
 def build(kind: str, config, arrays: dict[str, np.ndarray], source: str, *, dtype=None) -> nnx.Module:
     """A network of ``kind`` ("hand"/"body") with exactly these arrays; `WeightsError` names what is off."""
-    cls, _ = _KINDS[kind]
-    graphdef, state = nnx.split(nnx.eval_shape(lambda: cls(config, dtype=dtype, rngs=nnx.Rngs(0))))
-    flat = nnx.to_flat_state(state)
+    graphdef, flat = _abstract(kind, config, dtype)
     expected = {".".join(map(str, path)): tuple(v.shape) for path, v in flat}
     missing, unexpected = sorted(set(expected) - set(arrays)), sorted(set(arrays) - set(expected))
     if missing or unexpected:
@@ -52,6 +51,15 @@ def build(kind: str, config, arrays: dict[str, np.ndarray], source: str, *, dtyp
                                f"expected {shape}")
     leaves = [(path, v.replace(jnp.asarray(arrays[".".join(map(str, path))], jnp.float32))) for path, v in flat]
     return nnx.merge(graphdef, nnx.from_flat_state(leaves))
+
+
+@functools.lru_cache(maxsize=8)
+def _abstract(kind: str, config, dtype) -> tuple:
+    """The network's graph definition and its variables' shapes (an `nnx.FlatState`), traced once per architecture
+    and dtype (a second for a ResNet-50); `build` puts new variables in, leaving these as they are."""
+    cls, _ = _KINDS[kind]
+    graphdef, state = nnx.split(nnx.eval_shape(lambda: cls(config, dtype=dtype, rngs=nnx.Rngs(0))))
+    return graphdef, nnx.to_flat_state(state)
 
 
 def save(out_dir: Path, networks: Regressors | dict[str, nnx.Module], sources: dict[str, str]) -> list[Path]:
