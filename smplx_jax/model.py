@@ -1,6 +1,7 @@
 """`BodyModel`: an SMPL-X model file as an immutable pytree, with what forward needs precomputed."""
 
 import dataclasses
+import threading
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -78,19 +79,21 @@ def load_model(path, *, num_betas: int = 10, num_expression: int = 10, dtype=jnp
     """
     path = Path(path)
     key = _file_key(path) + (num_betas, num_expression, jnp.dtype(dtype).name)
-    if key[0] is not None and key in _LOADED:
-        _LOADED[key] = _LOADED.pop(key)  # the most recently used last
-        return _LOADED[key]
-    model = _load(path, num_betas, num_expression, dtype)
+    with _LOCK:
+        model = _LOADED.pop(key, None)
+    if model is None:
+        model = _load(path, num_betas, num_expression, dtype)
     if key[0] is not None:
-        _LOADED[key] = model
-        while len(_LOADED) > _KEEP:
-            del _LOADED[next(iter(_LOADED))]
+        with _LOCK:
+            _LOADED[key] = model  # the most recently used last
+            while len(_LOADED) > _KEEP:
+                del _LOADED[next(iter(_LOADED))]
     return model
 
 
 _KEEP = 4  # models kept (a float32 model holds ~70 MB, a float64 one ~140 MB)
 _LOADED: dict[tuple, BodyModel] = {}
+_LOCK = threading.Lock()
 
 
 def _file_key(path: Path) -> tuple:
