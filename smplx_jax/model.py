@@ -1,7 +1,7 @@
 """`BodyModel`: an SMPL-X model file as an immutable pytree, with what forward needs precomputed."""
 
 import dataclasses
-import threading
+import functools
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -78,32 +78,19 @@ def load_model(path, *, num_betas: int = 10, num_expression: int = 10, dtype=jnp
     with the same arguments, gives the same (immutable) `BodyModel` back without reading it again.
     """
     path = Path(path)
-    key = _file_key(path) + (num_betas, num_expression, jnp.dtype(dtype).name)
-    with _LOCK:
-        model = _LOADED.pop(key, None)
-    if model is None:
-        model = _load(path, num_betas, num_expression, dtype)
-    if key[0] is not None:
-        with _LOCK:
-            _LOADED[key] = model  # the most recently used last
-            while len(_LOADED) > _KEEP:
-                del _LOADED[next(iter(_LOADED))]
-    return model
-
-
-_KEEP = 4  # models kept (a float32 model holds ~70 MB, a float64 one ~140 MB)
-_LOADED: dict[tuple, BodyModel] = {}
-_LOCK = threading.Lock()
-
-
-def _file_key(path: Path) -> tuple:
-    """What says a file is the same one: its resolved path, device, inode, size and modification time (None when
-    it cannot be read; loading then raises)."""
     try:
         stat = path.stat()
-        return path.resolve(), stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns
     except OSError:
-        return (None,)
+        return _load(path, num_betas, num_expression, dtype)  # raises, naming the problem
+    return _load_kept(path, stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns, num_betas, num_expression,
+                      jnp.dtype(dtype))
+
+
+@functools.lru_cache(maxsize=4)  # a float32 model holds ~70 MB, a float64 one ~140 MB
+def _load_kept(path: Path, device: int, inode: int, size: int, mtime_ns: int, num_betas: int, num_expression: int,
+               dtype) -> BodyModel:
+    """`_load`, kept for the same file unchanged (``device`` to ``mtime_ns`` say which) and the same arguments."""
+    return _load(path, num_betas, num_expression, dtype)
 
 
 def _load(path: Path, num_betas: int, num_expression: int, dtype) -> BodyModel:
