@@ -27,10 +27,13 @@ sys.path.insert(0, str(Path(__file__).parent))
 def pytest_configure(config):
     """One on-disk cache of compiled programs for the whole run, new and empty (as on a new machine; not the
     user's ``~/.cache/jaxmocap/xla``), shared by pytest-xdist's workers and the subprocesses tests start, so that a
-    program one test compiled is read back by another (the suite's time is mostly XLA compiling); the CLI that
-    tests start keeps its lowered programs there too (`programs_kept`). The controller names it; the workers
-    inherit its environment."""
+    program one test compiled is read back by another (the suite's time is mostly XLA compiling). Every process
+    keeps its `jaxmocap.compile_cache.disk_jit` programs there as lowered, as the CLI does: a run in a worker and
+    ``jaxmocap run`` in a subprocess then compile the same programs (a plain `jax.jit` of the same function is
+    another program, compiled again). The controller names the folder; the workers inherit its environment."""
     import jax
+
+    from jaxmocap.compile_cache import use_compilation_cache
 
     if "JAXMOCAP_TEST_CACHE" not in os.environ or not hasattr(config, "workerinput"):
         os.environ["JAXMOCAP_TEST_CACHE"] = tempfile.mkdtemp(prefix="jaxmocap-tests-")
@@ -39,6 +42,7 @@ def pytest_configure(config):
     os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
     jax.config.update("jax_compilation_cache_dir", cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
+    use_compilation_cache()
 
 
 # The files that take longest, longest first (`pytest --durations=0`, summed per file, 2026-11-26): the workers
@@ -190,25 +194,10 @@ def frankmocap_run(frankmocap, tmp_path_factory):
 LIMB_BONES = ((16, 18), (17, 19), (18, 20), (19, 21), (1, 4), (2, 5), (4, 7), (5, 8))
 
 
-@contextlib.contextmanager
-def programs_kept():
-    """`jaxmocap.compile_cache.disk_jit` keeps its lowered programs in the run's folder during the block, where the
-    CLI in the tests' subprocesses keeps and reads them (`jaxmocap run` of the bundled clip's frames 20-28, the
-    shapes of `test_pipeline`'s run, in `test_batch`'s workers). Elsewhere the workers leave it off: exporting
-    each program costs its first call some 10-20% more (docs/BENCHMARKS.md), for a program no other process needs."""
-    from jaxmocap.compile_cache import keep_lowered_programs, use_compilation_cache
-
-    use_compilation_cache()  # (XLA's cache is already the run's: only its folder for lowered programs is set)
-    try:
-        yield
-    finally:
-        keep_lowered_programs(None)
-
-
 def assert_kept_for_the_next_process(*functions) -> None:
-    """Each of these `jaxmocap.compile_cache.disk_jit` functions was called in this process (within
-    `programs_kept`) and every program of it was written as it lowered (none fell back to a plain `jax.jit`): a
-    new process (`jaxmocap run`, a `batch` worker, `live`) reads them back instead of tracing them again."""
+    """Each of these `jaxmocap.compile_cache.disk_jit` functions was called in this process and every program of
+    it was written as it lowered (none fell back to a plain `jax.jit`): a new process (`jaxmocap run`, a `batch`
+    worker, `live`) reads them back instead of tracing them again."""
     held = {f.__qualname__: list(f.programs.values()) for f in functions}
     assert [name for name, programs in held.items() if not programs or None in programs] == []
 

@@ -12,7 +12,7 @@ import optimistix as optx
 import pytest
 
 import smplx_jax
-from fit64 import load64, synthetic64
+from fit64 import jit_fast_compile, load64, synthetic64
 from jaxmocap.integrate import fit_frame, fitting, keypoints, least_squares, levenberg_marquardt
 from smplx_jax import constants
 
@@ -33,7 +33,7 @@ def test_keypoint_jacobian_is_exact(x64, model_dir):
     tangents = (jnp.asarray(rng.normal(size=(55, 3))), jnp.asarray(rng.normal(size=10)))
     weights = jnp.asarray(rng.normal(size=(3, 67)))
 
-    @jax.jit
+    @jit_fast_compile
     def both(model, km, pose, betas):  # (ours, reference): values, JVPs, Hessian-vector products; transposes
         def reference(p, b):
             return smplx_jax.forward_joints(model, keypoints.params_of(p, b, model.num_expression))[OPENPOSE].T
@@ -98,14 +98,14 @@ def test_the_solvers_model_has_the_costs_gradient(x64, default_model_dir, focal)
     joints = (0, 2, 9, 12, 16, 18, 21, 30, 44)  # 3..8 are held fixed by the problem: their rows are the identity
     chol_config = dataclasses.replace(config, joints=joints + (3, 4))
 
-    @jax.jit
+    @jit_fast_compile
     def models(y, problem):  # the matrix-free model's gradient and its Hessian as a matrix, the dense model's
         cg = levenberg_marquardt.local_model(y, problem, dataclasses.replace(config, linear_solver="cg"))
         columns = jax.vmap(lambda e: jax.flatten_util.ravel_pytree(cg.hessian(unflat(e)))[0])(jnp.eye(flat.size))
         chol = levenberg_marquardt.local_model(y, problem, chol_config)
         return cg.gradient, columns.T, chol.gradient, chol.dense
 
-    @jax.jit
+    @jit_fast_compile
     def cost_gradient(y, problem):  # in the local increments of the rotations the solver steps by
         zero = jax.tree.map(jnp.zeros_like, y)
         return jax.grad(lambda step: levenberg_marquardt.cost_of(levenberg_marquardt.retract(y, step), problem,

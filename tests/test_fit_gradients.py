@@ -10,7 +10,7 @@ import numpy as np
 import optimistix as optx
 
 import smplx_jax
-from fit64 import load64, synthetic64
+from fit64 import jit_fast_compile, load64, synthetic64
 from jaxmocap.integrate import fit_frame
 from jaxmocap.integrate.camera import default_focal_length
 from jaxmocap.integrate.keypoints import params_of
@@ -53,7 +53,7 @@ def test_gradients_through_the_fit_match_finite_differences(x64, default_model_d
     kp, init = synthetic64(model, seed=3, noise_px=1.0, drop=0.15)
     camera = jnp.asarray([408.0, 481.0, 542.0])  # the solve's start camera (scale, tx, ty)
 
-    @jax.jit
+    @jit_fast_compile
     @functools.partial(jax.value_and_grad, argnums=(0, 1, 2), has_aux=True)
     def wrist_and_converged(kp, init, camera):
         result = fit_frame(model, kp, init, camera=camera)
@@ -83,7 +83,7 @@ def test_gradients_through_a_real_frames_fit_match_finite_differences(x64, defau
     size = np.asarray(data["image_size"], np.float64)
     focal = jnp.asarray(default_focal_length(tuple(size)), jnp.float64)
 
-    @jax.jit
+    @jit_fast_compile
     @functools.partial(jax.value_and_grad, argnums=(0, 1, 2), has_aux=True)
     def wrist_and_converged(kp, init, focal):
         result = fit_frame(model, kp, init, focal_length=focal, principal_point=jnp.asarray(size / 2))
@@ -105,7 +105,7 @@ def test_unconverged_fits_are_flagged_and_differentiated_step_by_step(x64, defau
     model = load64(default_model_dir)
     kp, init = synthetic64(model, seed=11, noise_px=1.0, drop=0.15)
 
-    @jax.jit
+    @jit_fast_compile
     @functools.partial(jax.value_and_grad, has_aux=True)  # one program for the values and the gradient
     def wrist(kp):
         result = fit_frame(model, kp, init, iterations=4, adjoint=optx.RecursiveCheckpointAdjoint())

@@ -14,7 +14,7 @@ import smplx
 import torch
 
 import smplx_jax
-from conftest import assert_kept_for_the_next_process, programs_kept
+from conftest import assert_kept_for_the_next_process
 from jaxmocap.cli import main
 from jaxmocap.detect.hand_tracker import HandTracker
 from jaxmocap.hand_motion import hand_meshes, read_hands
@@ -145,8 +145,7 @@ def test_no_hand_is_not_valid_and_exits_0(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def video(tmp_path_factory):
     out = tmp_path_factory.mktemp("video")
-    with programs_kept():
-        report = run(RunConfig(CLIP, mode="hands", end=32, chunk_size=16, progress=False), out)
+    report = run(RunConfig(CLIP, mode="hands", end=32, chunk_size=16, progress=False), out)
     return out, report, read_hands(out / "hands.npz")
 
 
@@ -242,9 +241,8 @@ def test_live_hands_streams_and_records_each_hand(video, tmp_path):
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
     receiver.settimeout(0.5)
-    with programs_kept():
-        report = live(LiveConfig(CLIP, mode="hands", max_frames=32, record=tmp_path, udp=receiver.getsockname(),
-                                 progress=False))
+    report = live(LiveConfig(CLIP, mode="hands", max_frames=32, record=tmp_path, udp=receiver.getsockname(),
+                             progress=False))
     messages = []
     with receiver:
         try:

@@ -15,6 +15,7 @@ import torch
 
 import smplx_jax
 from conftest import load
+from fit64 import jit_fast_compile
 from jaxmocap.batching import bucket_size
 from jaxmocap.cli import main
 from jaxmocap.detect.openpose import json_name, write_openpose_json
@@ -226,8 +227,8 @@ def test_vmapped_fit_equals_the_fit_of_each_frame_alone(default_model_dir, noisy
         keypoints = jnp.asarray(noisy.keypoints[frames], jnp.float64)
         init = jax.tree.map(lambda a: jnp.asarray(np.asarray(a)[frames], jnp.float64), noisy.init)
         one = functools.partial(fit_frame, model, iterations=20)
-        batched = jax.jit(jax.vmap(one))(keypoints, init)
-        single = jax.jit(one)
+        batched = jit_fast_compile(jax.vmap(one))(keypoints, init)
+        single = jit_fast_compile(one)
         for i in range(len(frames)):
             alone = single(keypoints[i], jax.tree.map(lambda a: a[i], init))
             assert int(alone.status) == fitting.OK

@@ -22,7 +22,7 @@ import pytest
 
 import smplx_jax
 from bench import live as live_bench
-from conftest import assert_kept_for_the_next_process, assert_one_body, cli_as_from_a_terminal, programs_kept
+from conftest import assert_kept_for_the_next_process, assert_one_body, cli_as_from_a_terminal
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import MediaError
 from jaxmocap.live import LiveConfig, causal, live, params_from_message
@@ -192,8 +192,7 @@ def played(tmp_path_factory):
 
     thread = threading.Thread(target=receive)
     thread.start()
-    with programs_kept():
-        report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False))
+    report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False))
     time.sleep(0.3)
     done.set()
     thread.join()

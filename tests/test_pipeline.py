@@ -27,7 +27,6 @@ from conftest import (
     assert_kept_for_the_next_process,
     assert_one_body,
     interrupted_at_chunk,
-    programs_kept,
     temporary_files,
 )
 from jaxmocap.cli import main
@@ -52,9 +51,8 @@ def run(source, out, **options):
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    with programs_kept():
-        report = run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
-                     progress=False, frankmocap_pkl=True, save_frames=True)
+    report = run(CLIP, out, start=20, end=20 + FRAMES, chunk_size=CHUNK, exports=("bvh", "gltf"),
+                 progress=False, frankmocap_pkl=True, save_frames=True)
     return out, report
 
 
