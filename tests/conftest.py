@@ -27,10 +27,11 @@ sys.path.insert(0, str(Path(__file__).parent))
 def pytest_configure(config):
     """One on-disk cache of compiled programs for the whole run, new and empty (as on a new machine; not the
     user's ``~/.cache/jaxmocap/xla``), shared by pytest-xdist's workers and the subprocesses tests start, so that a
-    program one test compiled is read back by another (the suite's time is mostly XLA compiling). Every process
-    keeps its `jaxmocap.compile_cache.disk_jit` programs there as lowered, as the CLI does: a run in a worker and
-    ``jaxmocap run`` in a subprocess then compile the same programs (a plain `jax.jit` of the same function is
-    another program, compiled again). The controller names the folder; the workers inherit its environment."""
+    program one test compiled is read back by another (the suite's time is mostly XLA compiling). Each worker keeps
+    its `jaxmocap.compile_cache.disk_jit` programs there as lowered from its start, as the CLI does: a run in a
+    worker and ``jaxmocap run`` in a subprocess then compile the same programs, whichever test ran first (a plain
+    `jax.jit` of the same function is another program). The controller names the folder; the workers inherit its
+    environment."""
     import jax
 
     from jaxmocap.compile_cache import use_compilation_cache
