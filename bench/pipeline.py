@@ -30,12 +30,14 @@ def main():
     from flax import nnx
 
     from jaxmocap.pipeline import RunConfig, run
-    from jaxmocap.regressors import BodyRegressor, HandRegressor, Regressors
+    from jaxmocap.regressors import BodyRegressor, HandRegressor, Regressors, initialised
     from jaxmocap.regressors.weights import save
 
     rows = []
     with tempfile.TemporaryDirectory() as weights:
-        save(Path(weights), Regressors(HandRegressor(rngs=nnx.Rngs(0)), BodyRegressor(rngs=nnx.Rngs(1))), {})
+        networks = Regressors(initialised(lambda: HandRegressor(rngs=nnx.Rngs(0))),
+                              initialised(lambda: BodyRegressor(rngs=nnx.Rngs(1))))
+        save(Path(weights), networks, {})
         for path, clip, options in (("default", CLIP, {}), ("body only", CLIP, dict(mode="body")),
                                     ("two people", TWO_PEOPLE, {}),
                                     ("regressors", CLIP, dict(weights=weights, integration="copy-paste"))):

@@ -2,9 +2,11 @@
 
 All functions take arrays with any leading batch shape. Near the identity they switch to Taylor series
 with the ``where``-twice pattern, so values and gradients are exact and finite at zero rotation without
-adding an epsilon to the input.
+adding an epsilon to the input. They are jitted: called outside any jit, one compiled program runs per shape (not
+each of its ~30 operations compiled and run alone); inside a trace they join the caller's program.
 """
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -24,6 +26,7 @@ def skew_polynomial(rotvec: Float[Array, "... 3"], a: Float[Array, "..."], b: Fl
     return jnp.stack(entries, axis=-1).reshape(rotvec.shape[:-1] + (3, 3))
 
 
+@jax.jit
 def rotvec_to_rotmat(rotvec: Float[ArrayLike, "... 3"]) -> Float[Array, "... 3 3"]:
     """Rodrigues' formula R = I + sin(t)/t K + (1 - cos t)/t^2 K^2 with K = skew(rotvec), t = |rotvec|."""
     rotvec = jnp.asarray(rotvec)
@@ -35,6 +38,7 @@ def rotvec_to_rotmat(rotvec: Float[ArrayLike, "... 3"]) -> Float[Array, "... 3 3
     return skew_polynomial(rotvec, sinc, cosc)
 
 
+@jax.jit
 def rotmat_to_quat(rotmat: Float[ArrayLike, "... 3 3"]) -> Float[Array, "... 4"]:
     """Unit quaternion (w, x, y, z) with w >= 0, from the best-conditioned of the four standard formulas."""
     m = rotmat
@@ -56,6 +60,7 @@ def rotmat_to_quat(rotmat: Float[ArrayLike, "... 3 3"]) -> Float[Array, "... 4"]
     return jnp.where(quat[..., :1] < 0, -quat, quat)
 
 
+@jax.jit
 def quat_to_rotvec(quat: Float[ArrayLike, "... 4"]) -> Float[Array, "... 3"]:
     """Axis-angle of a unit quaternion (w, x, y, z); angle in [0, pi]."""
     quat = jnp.where(quat[..., :1] < 0, -quat, quat)
@@ -69,6 +74,7 @@ def quat_to_rotvec(quat: Float[ArrayLike, "... 4"]) -> Float[Array, "... 3"]:
     return factor[..., None] * v
 
 
+@jax.jit
 def quat_to_rotmat(quat: Float[ArrayLike, "... 4"]) -> Float[Array, "... 3 3"]:
     """Rotation matrix of a quaternion (w, x, y, z); the quaternion is normalised first."""
     quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
@@ -81,6 +87,7 @@ def quat_to_rotmat(quat: Float[ArrayLike, "... 4"]) -> Float[Array, "... 3 3"]:
     return jnp.stack(rows, axis=-1).reshape(quat.shape[:-1] + (3, 3))
 
 
+@jax.jit
 def rotvec_to_quat(rotvec: Float[ArrayLike, "... 3"]) -> Float[Array, "... 4"]:
     """Unit quaternion (w, x, y, z) of an axis-angle vector."""
     theta2 = jnp.sum(rotvec * rotvec, axis=-1)
@@ -91,11 +98,13 @@ def rotvec_to_quat(rotvec: Float[ArrayLike, "... 3"]) -> Float[Array, "... 4"]:
     return jnp.concatenate([w[..., None], half_sinc[..., None] * rotvec], axis=-1)
 
 
+@jax.jit
 def rotmat_to_rotvec(rotmat: Float[ArrayLike, "... 3 3"]) -> Float[Array, "... 3"]:
     """Axis-angle of a rotation matrix; angle in [0, pi]."""
     return quat_to_rotvec(rotmat_to_quat(rotmat))
 
 
+@jax.jit
 def rot6d_to_rotmat(rot6d: Float[ArrayLike, "... 6"]) -> Float[Array, "... 3 3"]:
     """The 6D representation (a 3x2 matrix read row by row) to a rotation by Gram-Schmidt of its columns."""
     a = rot6d.reshape(rot6d.shape[:-1] + (3, 2))
@@ -107,6 +116,7 @@ def rot6d_to_rotmat(rot6d: Float[ArrayLike, "... 6"]) -> Float[Array, "... 3 3"]
     return jnp.stack([b1, b2, b3], axis=-1)
 
 
+@jax.jit
 def rotmat_to_rot6d(rotmat: Float[ArrayLike, "... 3 3"]) -> Float[Array, "... 6"]:
     """The first two columns of a rotation matrix, read row by row (inverse of `rot6d_to_rotmat`)."""
     rotmat = jnp.asarray(rotmat)

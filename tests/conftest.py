@@ -149,6 +149,18 @@ def cli_as_from_a_terminal(*args: str, python_options: tuple[str, ...] = ()) -> 
     return [sys.executable, *python_options, "-c", start, *args]
 
 
+# LLVM at -O0 for the processes that compile programs to run them once or twice (XLA's own passes, sharding
+# included, and its arithmetic as ever, rounding aside): compiling is most of what they cost.
+FAST_COMPILE_FLAG = "--xla_backend_optimization_level=0"
+
+
+def with_four_cpu_devices(**env: str) -> dict[str, str]:
+    """The environment of a subprocess that has 4 CPU devices (the sharding tests), compiling at `FAST_COMPILE_FLAG`;
+    ``env`` added."""
+    return os.environ | {"XLA_FLAGS": f"--xla_force_host_platform_device_count=4 {FAST_COMPILE_FLAG}",
+                         "JAX_PLATFORMS": "cpu"} | env
+
+
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
 WEIGHTS_RUN_FRAMES = (20, 28)  # the frames of the sample clip that `frankmocap_run` solves, in chunks of 4
 

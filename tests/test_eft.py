@@ -15,7 +15,7 @@ from jaxmocap.cli import main
 from jaxmocap.integrate import EFTConfig, fine_tune
 from jaxmocap.integrate.eft import _keypoints
 from jaxmocap.motion import read_motion
-from jaxmocap.regressors import BodyConfig, BodyRegressor
+from jaxmocap.regressors import BodyConfig, BodyRegressor, initialised
 from smplx_jax.rotations import rotvec_to_rotmat
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
@@ -28,7 +28,7 @@ def problem():
     """ResNet-18 regressor with random weights whose output starts near the mean body (as a trained one does);
     targets: its own predictions with bent shoulders, elbows and a knee, projected to crop pixels. The last
     frame has no keypoints at all, the third no legs."""
-    network = BodyRegressor(BodyConfig(depth=18), rngs=nnx.Rngs(0))
+    network = initialised(lambda: BodyRegressor(BodyConfig(depth=18), rngs=nnx.Rngs(0)))
     upright = jnp.array([1.0, 0, 0, -1, 0, 0])  # pi about x: y down
     network.init_pose[...] = jnp.concatenate([upright, jnp.tile(jnp.array([1.0, 0, 0, 1, 0, 0]), 23)])
     network.init_cam[...] = jnp.array([0.9, 0.0, 0.0])

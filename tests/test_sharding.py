@@ -4,10 +4,11 @@ In float64: in float32 per-device batches round in another order, and 20 Levenbe
 in directions the keypoints do not pin down (seen keypoints then differ by up to 2 px between equally good fits).
 """
 
-import os
 import subprocess
 import sys
 import textwrap
+
+from conftest import with_four_cpu_devices
 
 SCRIPT = textwrap.dedent("""
     import jax, numpy as np
@@ -42,8 +43,7 @@ SCRIPT = textwrap.dedent("""
 
 
 def test_sharded_fit_equals_single_device():
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu",
-               JAX_ENABLE_X64="1")
-    proc = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env, timeout=900)
+    proc = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True,
+                          env=with_four_cpu_devices(JAX_ENABLE_X64="1"), timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     print(proc.stdout)

@@ -12,6 +12,7 @@ import jax
 import numpy as np
 import pytest
 
+from conftest import with_four_cpu_devices
 from jaxmocap.regressors import load_network
 from train import configs
 from train.batches import batch_at
@@ -98,8 +99,8 @@ def test_sharded_step_equals_single_device_step(tmp_path, body_model):
     weights, BatchNorm's statistics and Adam's moments (the schedule's first step has a learning rate of 0, so the
     moments, which hold the gradient, are what shows it right)."""
     single, totals = steps_on_one_batch(body_model, 1)
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu",
-               PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).parent), os.environ.get("PYTHONPATH")])))
+    env = with_four_cpu_devices(
+        PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).parent), os.environ.get("PYTHONPATH")])))
     proc = subprocess.run([sys.executable, "-c", SHARDED, str(tmp_path / "sharded.npz")], capture_output=True,
                           text=True, env=env, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]

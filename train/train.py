@@ -20,7 +20,7 @@ from flax import nnx
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 import smplx_jax
-from jaxmocap.regressors import BodyConfig, BodyRegressor, HandConfig, HandRegressor
+from jaxmocap.regressors import BodyConfig, BodyRegressor, HandConfig, HandRegressor, initialised
 from jaxmocap.regressors.hand import CAMERA
 from jaxmocap.regressors.weights import save as save_weights
 from train import losses, metrics, plot
@@ -60,6 +60,10 @@ class Constants(NamedTuple):
 def create_network(config: TrainConfig) -> nnx.Module:
     """A freshly initialised regressor whose iterations start from the mean (FrankMocap / SPIN), its output layers
     initialised small (HMR's Xavier gain 0.01) so the first steps stay near the mean."""
+    return initialised(functools.partial(_new_network, config))
+
+
+def _new_network(config: TrainConfig) -> nnx.Module:
     rngs = nnx.Rngs(config.seed)
     if config.kind == "hand":
         network = HandRegressor(HandConfig(depth=config.depth), rngs=rngs)

@@ -19,10 +19,11 @@ from jaxmocap.regressors.decode import (
 from jaxmocap.regressors.hand import HandConfig, HandRegressor
 from jaxmocap.regressors.predict import BUCKETS, Predictor, predict_bodies, predict_hands
 from jaxmocap.regressors.resnet import ResNet
-from jaxmocap.regressors.weights import Regressors, WeightsError, load, load_network
+from jaxmocap.regressors.weights import Regressors, WeightsError, initialised, load, load_network
 
 __all__ = [
     "BUCKETS", "BodyConfig", "BodyOutput", "BodyPrediction", "BodyRegressor", "HandConfig", "HandPrediction",
     "HandRegressor", "Predictor", "Regressors", "ResNet", "WeightsError", "convert_frankmocap", "crops",
-    "decode_bodies", "decode_hands", "load", "load_network", "mirror_hand_params", "predict_bodies", "predict_hands",
+    "decode_bodies", "decode_hands", "initialised", "load", "load_network", "mirror_hand_params", "predict_bodies",
+    "predict_hands",
 ]
