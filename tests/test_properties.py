@@ -31,7 +31,8 @@ def test_jit_equals_eager(default_model_dir):
 
 def test_an_eager_call_runs_one_compiled_program(default_model_dir):
     """Called outside any jit (here vmapped over a batch of 5, a shape no other test uses), a forward pass of the
-    body or a hand lowers one program, not each of its operations, and nothing on its second call."""
+    body or a hand, or a rotation conversion, lowers one program, not each of its operations, and nothing on its
+    second call."""
     model = load(default_model_dir)
     params = random_params(seed=7, batch=5)
     hand_args = (smplx_jax.hand_model(model, "left"), smplx_jax.rotations.rotvec_to_rotmat(params.global_orient),
@@ -39,6 +40,13 @@ def test_an_eager_call_runs_one_compiled_program(default_model_dir):
     calls = [functools.partial(jax.vmap(fn, in_axes=(None, 0)), model, params)
              for fn in (smplx_jax.forward_joints, smplx_jax.forward, smplx_jax.posed_skeleton)]
     calls.append(functools.partial(jax.vmap(smplx_jax.hand_forward, in_axes=(None, 0, 0, 0)), *hand_args))
+    rot = smplx_jax.rotations
+    rotvecs = np.asarray(params.left_hand_pose)  # (5, 15, 3)
+    rotmats, quats = np.asarray(rot.rotvec_to_rotmat(rotvecs)), np.asarray(rot.rotvec_to_quat(rotvecs))
+    calls += [functools.partial(fn, x[:, :7]) for fn, x in (
+        (rot.rotvec_to_rotmat, rotvecs), (rot.rotvec_to_quat, rotvecs), (rot.rotmat_to_rotvec, rotmats),
+        (rot.rotmat_to_quat, rotmats), (rot.rotmat_to_rot6d, rotmats), (rot.quat_to_rotvec, quats),
+        (rot.quat_to_rotmat, quats), (rot.rot6d_to_rotmat, np.asarray(rot.rotmat_to_rot6d(rotmats))))]
     lowered = []
 
     def count(event, seconds, **kwargs):
@@ -54,7 +62,7 @@ def test_an_eager_call_runs_one_compiled_program(default_model_dir):
             counts.append(len(lowered) - before)
     finally:
         jax.monitoring.unregister_event_duration_listener(count)
-    assert counts == [1, 1, 1, 1, 0, 0, 0, 0], counts
+    assert counts == [1] * len(calls) + [0] * len(calls), counts
 
 
 def test_vmap_equals_loop(default_model_dir):

@@ -7,6 +7,7 @@ import jax
 import numpy as np
 import pytest
 import torch
+from flax import nnx
 
 import frankmocap_reference as ref
 import jaxmocap.regressors as R
@@ -59,6 +60,22 @@ def test_microbatches_match_whole_batches(converted, predictor):
     x = np.random.default_rng(9).normal(0, 1, (6, 224, 224, 3)).astype(np.float32)
     chunked = R.Predictor(R.load(converted), buckets=(8,), microbatch=4)  # one bucket, two chunks of 4
     assert np.abs(np.asarray(chunked.hand(x)) - np.asarray(predictor.hand(x))).max() <= 1e-5
+
+
+def test_initialised_is_the_network_built_eagerly():
+    """`initialised` (the initialisers compiled as one program at -O0) gives the network built eagerly: the same
+    graph and, rounding aside, the same weights."""
+    def new():
+        rngs = nnx.Rngs(3)
+        return nnx.Sequential(nnx.Conv(3, 8, (3, 3), rngs=rngs), nnx.BatchNorm(8, rngs=rngs),
+                              nnx.Linear(8, 5, rngs=rngs))
+
+    (eager_graph, eager), (graph, state) = nnx.split(new()), nnx.split(R.initialised(new))
+    assert graph == eager_graph
+    leaves, eager_leaves = jax.tree.leaves(state), jax.tree.leaves(eager)
+    assert len(leaves) == len(eager_leaves) == 8 and any(np.ptp(np.asarray(a)) > 0.1 for a in leaves)
+    for a, b in zip(leaves, eager_leaves):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-7)
 
 
 def test_weights_are_pickle_free(converted):
