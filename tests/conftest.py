@@ -2,6 +2,7 @@
 interrupted on purpose."""
 
 import contextlib
+import functools
 import os
 import shutil
 import sys
@@ -149,8 +150,11 @@ def cli_as_from_a_terminal(*args: str, python_options: tuple[str, ...] = ()) -> 
     return [sys.executable, *python_options, "-c", start, *args]
 
 
-# LLVM at -O0 for the processes that compile programs to run them once or twice (XLA's own passes, sharding
-# included, and its arithmetic as ever, rounding aside): compiling is most of what they cost.
+# LLVM at -O0 for the tests' own programs that compile for seconds and then run a handful of times (the fit's
+# gradients and Jacobians, jit = eager, the 4-device processes): XLA's own passes (sharding included) and its
+# arithmetic as ever, rounding aside; they compile in about half the time and run slower, which a few runs do not
+# feel (docs/BENCHMARKS.md, "Tests that share their programs"). `FAST_COMPILE_FLAG`: the same for a new process.
+jit_fast_compile = functools.partial(jax.jit, compiler_options={"xla_backend_optimization_level": 0})
 FAST_COMPILE_FLAG = "--xla_backend_optimization_level=0"
 
 

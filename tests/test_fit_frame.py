@@ -12,7 +12,8 @@ import optimistix as optx
 import pytest
 
 import smplx_jax
-from fit64 import jit_fast_compile, load64, synthetic64
+from conftest import jit_fast_compile
+from fit64 import load64, synthetic64
 from jaxmocap.integrate import fit_frame, fitting, keypoints, least_squares, levenberg_marquardt
 from smplx_jax import constants
 
@@ -134,9 +135,9 @@ def test_jit_equals_eager(x64, default_model_dir):
     kp, init = synthetic64(model, seed=4)
     kp = kp.at[5].set(0.0)
     one = functools.partial(fit_frame, model, iterations=5)
-    eager, jitted = one(kp, init), jax.jit(one)(kp, init)
+    eager, jitted = one(kp, init), jit_fast_compile(one)(kp, init)
     km, lens = fitting.openpose_keypoint_model(model), fitting.lens_arrays(None, None, jnp.float64)
-    steps = jax.jit(lambda kp, pose, betas: fitting.fit_one(km, kp, pose, betas, None, lens,
+    steps = jit_fast_compile(lambda kp, pose, betas: fitting.fit_one(km, kp, pose, betas, None, lens,
                                                             fitting.FitConfig(iterations=5), differentiable=False))
     for other in (jitted, steps(kp, init.full_pose(), init.betas)):
         for a, b in zip(jax.tree.leaves(eager), jax.tree.leaves(other)):
@@ -162,7 +163,7 @@ def test_a_solve_stalled_at_its_damping_cap_restarts_once_then_stops_unconverged
     solver = levenberg_marquardt.LevenbergMarquardt(config, levenberg_marquardt.default_tolerance(jnp.float64))
     state = levenberg_marquardt.initial_state(problem, start, config)
     assert not bool(solver.terminate(None, start, problem, {}, state, frozenset())[0])
-    step = jax.jit(lambda y, state: solver.step(None, y, problem, {}, state, frozenset())[:2])
+    step = jit_fast_compile(lambda y, state: solver.step(None, y, problem, {}, state, frozenset())[:2])
     # a state no step can improve on (its cost 0), one refusal short of the cap, with a secant
     near_cap = eqx.tree_at(lambda s: (s.cost, s.damping, s.secant), state,
                            (jnp.zeros((), jnp.float64), jnp.asarray(levenberg_marquardt.MAX_DAMPING / 1.5),

@@ -10,7 +10,8 @@ import numpy as np
 import optimistix as optx
 
 import smplx_jax
-from fit64 import jit_fast_compile, load64, synthetic64
+from conftest import jit_fast_compile
+from fit64 import load64, synthetic64
 from jaxmocap.integrate import fit_frame
 from jaxmocap.integrate.camera import default_focal_length
 from jaxmocap.integrate.keypoints import params_of

@@ -14,8 +14,7 @@ import smplx
 import torch
 
 import smplx_jax
-from conftest import load
-from fit64 import jit_fast_compile
+from conftest import jit_fast_compile, load
 from jaxmocap.batching import bucket_size
 from jaxmocap.cli import main
 from jaxmocap.detect.openpose import json_name, write_openpose_json

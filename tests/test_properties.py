@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import smplx_jax
-from conftest import load
+from conftest import jit_fast_compile, load
 from params_util import random_params
 
 
@@ -104,8 +104,8 @@ def test_gradients_match_finite_differences(default_model_dir, at_zero):
         if at_zero:
             params = jax.tree.map(jnp.zeros_like, params)
         weights = jnp.asarray(np.random.default_rng(8).normal(size=(127, 3)))
-        grads = jax.jit(jax.grad(_loss, argnums=1))(model, params, weights)
-        loss = jax.jit(_loss)
+        grads = jit_fast_compile(jax.grad(_loss, argnums=1))(model, params, weights)
+        loss = jit_fast_compile(_loss)
         rng = np.random.default_rng(9)
         for name in ("global_orient", "body_pose", "right_hand_pose", "jaw_pose", "betas", "expression"):
             value = getattr(params, name)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import smplx_jax
-from conftest import load
+from conftest import jit_fast_compile, load
 from jaxmocap.regressors import BodyOutput, crops
 from smplx_jax.constants import BODY25_FROM_SMPLX
 from smplx_jax.default_model import default_model_path
@@ -25,8 +25,10 @@ from train.losses import (
 )
 
 # One compiled function each, for values and gradients: ((total, terms), gradient of total).
-_hand = jax.jit(jax.value_and_grad(lambda raw, m, h, ex: _with_terms(hand_losses(m, h, raw, ex)), has_aux=True))
-_body = jax.jit(jax.value_and_grad(lambda out, m, ex, w: _with_terms(body_losses(m, out, ex, w)), has_aux=True))
+_hand = jit_fast_compile(jax.value_and_grad(lambda raw, m, h, ex: _with_terms(hand_losses(m, h, raw, ex)),
+                                            has_aux=True))
+_body = jit_fast_compile(jax.value_and_grad(lambda out, m, ex, w: _with_terms(body_losses(m, out, ex, w)),
+                                            has_aux=True))
 _body_joints = jax.jit(body_joints)
 
 
