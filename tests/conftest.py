@@ -153,7 +153,8 @@ def cli_as_from_a_terminal(*args: str, python_options: tuple[str, ...] = ()) -> 
 # LLVM at -O0 for the tests' own programs that compile for seconds and then run a handful of times (the fit's
 # gradients and Jacobians, jit = eager, the 4-device processes): XLA's own passes (sharding included) and its
 # arithmetic as ever, rounding aside; they compile in about half the time and run slower, which a few runs do not
-# feel (docs/BENCHMARKS.md, "Tests that share their programs"). `FAST_COMPILE_FLAG`: the same for a new process.
+# feel (docs/BENCHMARKS.md, "Tests that share their programs", "Programs that run once"). `FAST_COMPILE_FLAG`: the
+# same for a new process.
 jit_fast_compile = functools.partial(jax.jit, compiler_options={"xla_backend_optimization_level": 0})
 FAST_COMPILE_FLAG = "--xla_backend_optimization_level=0"
 

@@ -34,8 +34,8 @@ class Regressors(NamedTuple):
 
 def initialised(new: Callable[[], nnx.Module]) -> nnx.Module:
     """``new()``, a network with fresh random weights, its initialisers compiled as one program with LLVM at -O0:
-    they run once, so compiling is all they cost (a ResNet's ~15 initialisers compile one by one in ~10 s on a
-    CPU, together at -O0 in ~3 s). The weights are ``new()``'s, rounding aside."""
+    they run once, so compiling is all they cost (a ResNet-18 built so in 4.8 s rather than 11.6 s on 2 CPU cores:
+    docs/BENCHMARKS.md). The weights are ``new()``'s, rounding aside."""
     graphdef, _ = nnx.split(nnx.eval_shape(new))
     state = jax.jit(lambda: nnx.split(new())[1], compiler_options={"xla_backend_optimization_level": 0})()
     return nnx.merge(graphdef, state)
