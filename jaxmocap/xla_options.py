@@ -13,6 +13,9 @@ from importlib import metadata
 
 OPTION, VALUE = "xla_cpu_use_fusion_emitters", "false"
 KNOWN_JAXLIB = ((0, 5, 3), (0, 11))  # the option exists in 0.5.3, 0.6.2, 0.7.2, 0.9.0 and 0.10.2 (checked)
+# `jax.jit(..., compiler_options=RUN_ONCE)` for a program that runs once or a few times: LLVM at -O0 compiles it in
+# about half the time (XLA's own passes and its arithmetic as ever, rounding aside) and runs it slower.
+RUN_ONCE = {"xla_backend_optimization_level": 0}
 
 
 def _release(version: str) -> tuple[int, ...]:

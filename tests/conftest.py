@@ -69,6 +69,7 @@ import jax  # noqa: E402
 
 import jaxmocap  # noqa: E402, F401  (sets XLA's options before anything starts JAX)
 import smplx_jax  # noqa: E402
+from jaxmocap.xla_options import RUN_ONCE  # noqa: E402
 from random_model import random_model_arrays  # noqa: E402
 from smplx_jax.default_model import default_model_path  # noqa: E402
 
@@ -150,13 +151,12 @@ def cli_as_from_a_terminal(*args: str, python_options: tuple[str, ...] = ()) -> 
     return [sys.executable, *python_options, "-c", start, *args]
 
 
-# LLVM at -O0 for the tests' own programs that compile for seconds and then run a handful of times (the fit's
-# gradients and Jacobians, jit = eager, the 4-device processes): XLA's own passes (sharding included) and its
-# arithmetic as ever, rounding aside; they compile in about half the time and run slower, which a few runs do not
-# feel (docs/BENCHMARKS.md, "Tests that share their programs", "Programs that run once"). `FAST_COMPILE_FLAG`: the
+# LLVM at -O0 (`xla_options.RUN_ONCE`) for the tests' own programs that compile for seconds and then run a handful
+# of times (the fit's gradients and Jacobians, jit = eager, the 4-device processes), which do not feel its slower
+# runs (docs/BENCHMARKS.md, "Tests that share their programs", "Programs that run once"). `FAST_COMPILE_FLAG`: the
 # same for a new process.
-jit_fast_compile = functools.partial(jax.jit, compiler_options={"xla_backend_optimization_level": 0})
-FAST_COMPILE_FLAG = "--xla_backend_optimization_level=0"
+jit_fast_compile = functools.partial(jax.jit, compiler_options=RUN_ONCE)
+FAST_COMPILE_FLAG = " ".join(f"--{option}={value}" for option, value in RUN_ONCE.items())
 
 
 def with_four_cpu_devices(**env: str) -> dict[str, str]:

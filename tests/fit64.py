@@ -16,4 +16,3 @@ def synthetic64(model, **kwargs):
     data = synthetic.make_problem(model, 1, **kwargs)
     return jnp.asarray(data.keypoints[0], jnp.float64), jax.tree.map(lambda a: jnp.asarray(a[0], jnp.float64),
                                                                       data.init)
-

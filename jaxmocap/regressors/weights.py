@@ -18,6 +18,7 @@ from jaxmocap.errors import InputError
 from jaxmocap.io import atomic_path, atomic_write_text, file_sha256
 from jaxmocap.regressors.body import BodyConfig, BodyRegressor
 from jaxmocap.regressors.hand import HandConfig, HandRegressor
+from jaxmocap.xla_options import RUN_ONCE
 
 FORMAT, VERSION, INDEX = "jaxmocap-regressors", 1, "regressors.json"
 _KINDS = {"hand": (HandRegressor, HandConfig), "body": (BodyRegressor, BodyConfig)}
@@ -37,7 +38,7 @@ def initialised(new: Callable[[], nnx.Module]) -> nnx.Module:
     they run once, so compiling is all they cost (a ResNet-18 built so in 4.8 s rather than 11.6 s on 2 CPU cores:
     docs/BENCHMARKS.md). The weights are ``new()``'s, rounding aside."""
     graphdef, _ = nnx.split(nnx.eval_shape(new))
-    state = jax.jit(lambda: nnx.split(new())[1], compiler_options={"xla_backend_optimization_level": 0})()
+    state = jax.jit(lambda: nnx.split(new())[1], compiler_options=RUN_ONCE)()
     return nnx.merge(graphdef, state)
 
 
