@@ -72,10 +72,9 @@ class _DiskJit:
         static = tuple((k, v) for k, v in bound.arguments.items() if k in self.static_argnames)
         dynamic = {k: v for k, v in bound.arguments.items() if k not in self.static_argnames}
         leaves, tree = jax.tree.flatten(dynamic)
-        platform = _platform(leaves)
+        avals, platform = _avals_and_platform(leaves)
         if platform is None:
             return self.jitted(*args, **kwargs)
-        avals = tuple((jax.numpy.shape(x), jax.numpy.result_type(x), _weak(x)) for x in leaves)
         key = (static, tree, avals, platform, _settings())
         if key not in self.programs:
             self.programs[key] = self._load_or_export(static, dynamic, key)
@@ -107,25 +106,27 @@ class _DiskJit:
         return jax.jit(lambda dynamic: exported.call(**dynamic))
 
 
-def _platform(leaves) -> str | None:
-    """The platform the call runs on: that of the device its committed arrays are on, else JAX's default; None
-    under a transformation (tracers) or across devices."""
-    devices = set()
-    for leaf in leaves:
-        if isinstance(leaf, jax.core.Tracer):
-            return None
-        if isinstance(leaf, jax.Array) and leaf.committed:
-            devices |= leaf.devices()
+def _avals_and_platform(leaves) -> tuple[tuple, str | None]:
+    """Each leaf's shape, dtype and weak type, and the platform the call runs on: that of the device its committed
+    arrays are on, else JAX's default; None under a transformation (tracers) or across devices. One pass, reading
+    attributes (the live solve's 116 leaves: 0.2 ms, against 0.7 ms through ``jnp.result_type``, every frame)."""
+    avals, shardings = [], {}
+    for x in leaves:
+        if isinstance(x, jax.core.Tracer):
+            return (), None
+        if isinstance(x, jax.Array):
+            avals.append((x.shape, x.dtype, x.weak_type))
+            if x.committed:
+                shardings[id(x.sharding)] = x.sharding
+        else:
+            avals.append((jax.numpy.shape(x), jax.numpy.result_type(x), isinstance(x, (bool, int, float, complex))))
+    devices = set().union(*(sharding.device_set for sharding in shardings.values()))
     if len(devices) > 1:
-        return None
+        return (), None
     device = devices.pop() if devices else None
     if device is None or device.platform == jax.default_backend():
-        return jax.export.default_export_platform()
-    return "cpu" if device.platform == "cpu" else None  # the host beside an accelerator
-
-
-def _weak(x) -> bool:
-    return bool(getattr(x, "weak_type", False)) or isinstance(x, (bool, int, float, complex))
+        return tuple(avals), jax.export.default_export_platform()
+    return tuple(avals), "cpu" if device.platform == "cpu" else None  # the host beside an accelerator
 
 
 def _settings() -> tuple:

@@ -1,6 +1,7 @@
 """`compile_cache.disk_jit`: a lowered program is read back from disk by the next process instead of traced again,
-keyed so that another argument structure, shape, dtype or static value gets its own; unreadable or foreign files
-are exported anew (and import nothing); calls under a transformation are `jax.jit`'s."""
+keyed as JAX keys its programs (another argument structure, shape, dtype, weak type or static value gets its
+own; NumPy arrays share the program of the arrays JAX makes of them); unreadable or foreign files are exported
+anew (and import nothing); calls under a transformation are `jax.jit`'s."""
 
 import os
 import subprocess
@@ -81,9 +82,11 @@ def test_one_file_per_structure_shape_dtype_and_static_value(programs):
     assert len(traces) == 2 and first._cache_size() == held + 1
     again = disk_jit(scaled, static_argnames="n")  # as in a new process: nothing in memory
     assert equal(again(x, y, n=2), expected) and len(traces) == 2
-    for args in ((x, y, 3), (x[:2], y, 2), (x.astype(jnp.int32), y, 2), (x, {"a": y}, 2)):
+    assert equal(again(np.asarray(x), np.asarray(y, np.float64), 2), expected) and len(traces) == 2  # as JAX sees
+    for args in ((x, y, 3), (x[:2], y, 2), (x.astype(jnp.int32), y, 2), (x, {"a": y}, 2), (x, jnp.float32(1), 2),
+                 (x, 1.0, 2)):  # the last two differ in their weak type alone
         again(*args)
-    assert len(traces) == 6 and len(files(programs)) == 5
+    assert len(traces) == 8 and len(files(programs)) == 7
 
 
 def test_calls_under_a_transformation_are_jits(programs):
