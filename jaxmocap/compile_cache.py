@@ -110,17 +110,16 @@ def _avals_and_platform(leaves) -> tuple[tuple, str | None]:
     """Each leaf's shape, dtype and weak type, and the platform the call runs on: that of the device its committed
     arrays are on, else JAX's default; None under a transformation (tracers) or across devices. One pass, reading
     attributes (the live solve's 116 leaves: 0.2 ms, against 0.7 ms through ``jnp.result_type``, every frame)."""
-    avals, shardings = [], {}
+    avals, devices = [], set()
     for x in leaves:
         if isinstance(x, jax.core.Tracer):
             return (), None
         if isinstance(x, jax.Array):
             avals.append((x.shape, x.dtype, x.weak_type))
             if x.committed:
-                shardings[id(x.sharding)] = x.sharding
+                devices |= x.sharding.device_set
         else:
             avals.append((jax.numpy.shape(x), jax.numpy.result_type(x), isinstance(x, (bool, int, float, complex))))
-    devices = set().union(*(sharding.device_set for sharding in shardings.values()))
     if len(devices) > 1:
         return (), None
     device = devices.pop() if devices else None
