@@ -1,10 +1,17 @@
-"""XLA options for jaxmocap's programs, set when the package is imported (it starts no JAX computation).
+"""XLA options for jaxmocap's programs, and the threads of the LAPACK they call, set when the package is imported
+(it starts no JAX computation).
 
 XLA's newer CPU fusion emitters (its default in recent jaxlib) compile the fit's programs a third slower than its
 older ones and run them no faster (docs/BENCHMARKS.md, "Compile time"), so the older ones are asked for (ResNets,
 the regressors' and the trainer's, run 5-15% slower with the older ones; ``=true`` keeps the default). Only for
 the jaxlib versions known to have the option (XLA stops a process whose ``XLA_FLAGS`` name an option it does not
 know), and never over the user's own choice in ``XLA_FLAGS``.
+
+jaxlib's LAPACK kernels on the CPU (the dense fit's Cholesky factorisations, `jnp.linalg`) run on scipy's OpenBLAS,
+which jaxlib loads at its first such call. OpenBLAS's threads spin while they wait for work: two processes on two
+cores (`jaxmocap batch --workers 2`, pytest's two workers) then fight over them, and 20 float64 fits of a frame took
+140 s each side instead of 3 s; alone, one thread is as fast on matrices of the fit's size (178 x 178). So
+``OPENBLAS_NUM_THREADS=1``, unless the user set it (docs/BENCHMARKS.md, "LAPACK's threads").
 """
 
 import os
@@ -33,4 +40,13 @@ def set_cpu_options(environ=os.environ) -> bool:
     if OPTION in flags or not KNOWN_JAXLIB[0] <= release < KNOWN_JAXLIB[1]:
         return False
     environ["XLA_FLAGS"] = f"{flags} --{OPTION}={VALUE}".strip()
+    return True
+
+
+def set_lapack_threads(environ=os.environ) -> bool:
+    """``OPENBLAS_NUM_THREADS=1`` unless ``environ`` names a number already; True when set. It holds for each OpenBLAS
+    loaded after it (scipy's, which jaxlib's LAPACK calls) and in the processes started from this one."""
+    if "OPENBLAS_NUM_THREADS" in environ:
+        return False
+    environ["OPENBLAS_NUM_THREADS"] = "1"
     return True

@@ -1,4 +1,5 @@
-"""XLA's options: the older CPU fusion emitters asked for on import, before JAX starts, never over the user's."""
+"""XLA's options: the older CPU fusion emitters asked for on import, before JAX starts, never over the user's; and
+OpenBLAS held to one thread for jaxlib's LAPACK."""
 
 import os
 import subprocess
@@ -6,7 +7,7 @@ import sys
 from importlib import metadata
 
 from jaxmocap import xla_options
-from jaxmocap.xla_options import set_cpu_options
+from jaxmocap.xla_options import set_cpu_options, set_lapack_threads
 
 # Records XLA_FLAGS as JAX starts its backend (the moment XLA reads them), then imports the module given.
 SPY = """
@@ -48,3 +49,33 @@ def test_every_entry_point_sets_it_before_jax_starts():
                              timeout=300)
         assert out.returncode == 0, out.stderr[-2000:]
         assert "XLA_FLAGS at start: --xla_cpu_use_fusion_emitters=false" in out.stdout, (module, out.stdout)
+
+
+# Imports the module given as a user's entry point does, runs a Cholesky factorisation on the CPU (jaxlib loads
+# scipy's OpenBLAS for it), then prints each OpenBLAS loaded in the process and its number of threads.
+THREADS = """
+import ctypes, sys
+__import__(sys.argv[1])
+import jax.numpy as jnp
+jnp.linalg.cholesky(jnp.eye(3)).block_until_ready()
+paths = sorted({line.split()[-1] for line in open("/proc/self/maps") if "openblas" in line.rsplit("/", 1)[-1]})
+for path in paths:
+    lib = ctypes.CDLL(path)
+    count = next(getattr(lib, name) for name in ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads",
+                                                 "openblas_get_num_threads") if hasattr(lib, name))
+    print(path, count())
+"""
+
+
+def test_lapack_runs_on_one_openblas_thread_unless_the_user_says():
+    """Each OpenBLAS a jaxmocap process loads (scipy's, which jaxlib's LAPACK calls, among them) runs one thread:
+    OpenBLAS's spinning threads made two processes on two cores some 40x slower (`xla_options`)."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    out = subprocess.run([sys.executable, "-c", THREADS, "jaxmocap.cli"], capture_output=True, text=True, env=env,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    threads = dict(line.rsplit(" ", 1) for line in out.stdout.splitlines())
+    assert any("scipy" in path for path in threads) and set(threads.values()) == {"1"}, threads
+    mine, unset = {"OPENBLAS_NUM_THREADS": "4"}, {}
+    assert not set_lapack_threads(mine) and mine == {"OPENBLAS_NUM_THREADS": "4"}
+    assert set_lapack_threads(unset) and unset == {"OPENBLAS_NUM_THREADS": "1"}
