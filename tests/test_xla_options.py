@@ -70,12 +70,14 @@ for path in paths:
 def test_lapack_runs_on_one_openblas_thread_unless_the_user_says():
     """Each OpenBLAS a jaxmocap process loads (scipy's, which jaxlib's LAPACK calls, among them) runs one thread:
     OpenBLAS's spinning threads made two processes on two cores some 40x slower (`xla_options`)."""
-    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    # (OpenBLAS also reads GOTO_NUM_THREADS and OMP_NUM_THREADS, which conftest.py sets for PyTorch)
+    unset = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")
+    env = {k: v for k, v in os.environ.items() if k not in unset}
     out = subprocess.run([sys.executable, "-c", THREADS, "jaxmocap.cli"], capture_output=True, text=True, env=env,
                          timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     threads = dict(line.rsplit(" ", 1) for line in out.stdout.splitlines())
     assert any("scipy" in path for path in threads) and set(threads.values()) == {"1"}, threads
-    mine, unset = {"OPENBLAS_NUM_THREADS": "4"}, {}
+    mine, empty = {"OPENBLAS_NUM_THREADS": "4"}, {}
     assert not set_lapack_threads(mine) and mine == {"OPENBLAS_NUM_THREADS": "4"}
-    assert set_lapack_threads(unset) and unset == {"OPENBLAS_NUM_THREADS": "1"}
+    assert set_lapack_threads(empty) and empty == {"OPENBLAS_NUM_THREADS": "1"}
