@@ -100,28 +100,30 @@ def warp_perspective(image: np.ndarray, matrix: np.ndarray, size: int, border_ze
     BlazePose's landmarks follow such differences by 1-16 px (docs/BENCHMARKS.md, "Detector")."""
     _, m = cv2.invert(np.asarray(matrix, np.float64), flags=cv2.DECOMP_LU)  # OpenCV's own 3x3 inverse
     x = np.arange(size, dtype=np.float64)
-
-    def source(k):  # m[k,0] x + m[k,1] y + m[k,2], summed in OpenCV's order
-        out = (m[k, 0] * x)[None, :] + (m[k, 1] * x)[:, None]
-        out += m[k, 2]
-        return out
-
     with np.errstate(divide="ignore"):
-        w = 32.0 / source(2)  # positions in 1/32 pixel; none where the row is at infinity
+        w = 32.0 / _source(m[2], x)  # positions in 1/32 pixel; none where the row is at infinity
     w[np.isinf(w)] = 0.0
-
-    def fixed(k):
-        position = source(k)
-        position *= w
-        np.clip(position, -2.0**31, 2.0**31 - 1, out=position)
-        return np.rint(position, out=position).astype(np.int32)
-
-    fixed_x, fixed_y = fixed(0), fixed(1)
+    fixed_x, fixed_y = _fixed(m[0], x, w), _fixed(m[1], x, w)
     whole = np.stack([fixed_x >> 5, fixed_y >> 5], axis=-1)
     np.clip(whole, -32768, 32767, out=whole)
     fraction = ((fixed_y & 31) << 5 | (fixed_x & 31)).astype(np.uint16)
     border = cv2.BORDER_CONSTANT if border_zero else cv2.BORDER_REPLICATE
     return cv2.remap(image, whole.astype(np.int16), fraction, cv2.INTER_LINEAR, borderMode=border, borderValue=0)
+
+
+def _source(row: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``row[0] x + row[1] y + row[2]`` over the (y, x) grid of output pixels, summed in OpenCV's order."""
+    out = (row[0] * x)[None, :] + (row[1] * x)[:, None]
+    out += row[2]
+    return out
+
+
+def _fixed(row: np.ndarray, x: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """A source coordinate of each output pixel in 1/32 pixel, rounded, as int32."""
+    position = _source(row, x)
+    position *= w
+    np.clip(position, -2.0**31, 2.0**31 - 1, out=position)
+    return np.rint(position, out=position).astype(np.int32)
 
 
 def project(points: np.ndarray, rect: Rect, padding) -> np.ndarray:
