@@ -105,6 +105,12 @@ def _load(path: Path, num_betas: int, num_expression: int, dtype) -> BodyModel:
     return _build(arrays, shapedirs, num_betas, num_expression, dtype)
 
 
+def device_array(a, dtype) -> Array:
+    """The NumPy array ``a`` as a JAX array of ``dtype``, converted by NumPy: JAX would compile a conversion program
+    for each shape (and run it alone, even inside a trace, under `jax.ensure_compile_time_eval`)."""
+    return jnp.asarray(np.asarray(a, np.dtype(dtype)), dtype)
+
+
 def _coordinate_major(per_vertex: np.ndarray) -> np.ndarray:
     """(N, 3, ...) per-vertex data to (..., 3N) with column ``c * N + n``."""
     moved = np.moveaxis(per_vertex, (0, 1), (-1, -2))
@@ -129,28 +135,27 @@ def _build(arrays, shapedirs, num_betas, num_expression, dtype) -> BodyModel:
     skin_weights = np.take_along_axis(weights, skin_joints, axis=1)
 
     hand_components = np.stack([arrays["hands_componentsl"], arrays["hands_componentsr"]])
-    def f(a):
-        return jnp.asarray(a, dtype=dtype)
+    f = functools.partial(device_array, dtype=dtype)
     return BodyModel(
         template_cm=f(v_template.T),
         shapedirs_cm=f(_coordinate_major(shapedirs)),
         posedirs_cm=f(_coordinate_major(posedirs)),
         weights_t=f(weights.T),
-        skin_joints=jnp.asarray(skin_joints.T, dtype=jnp.int32),
+        skin_joints=device_array(skin_joints.T, jnp.int32),
         skin_weights=f(skin_weights.T),
         joint_template=f(j_regressor @ v_template),
         joint_shapedirs=f(np.einsum("jv,vcs->jcs", j_regressor, shapedirs)),
-        faces=jnp.asarray(faces, dtype=jnp.int32),
+        faces=device_array(faces, jnp.int32),
         hand_mean=f(np.stack([arrays["hands_meanl"], arrays["hands_meanr"]])),
         hand_components=f(hand_components),
-        sparse_ids=jnp.asarray(sparse_ids, dtype=jnp.int32),
+        sparse_ids=device_array(sparse_ids, jnp.int32),
         sparse_template_cm=f(v_template[sparse_ids].T),
         sparse_shapedirs_cm=f(_coordinate_major(shapedirs[sparse_ids])),
         sparse_posedirs_cm=f(_coordinate_major(posedirs[sparse_ids])),
-        sparse_skin_joints=jnp.asarray(skin_joints[sparse_ids].T, dtype=jnp.int32),
+        sparse_skin_joints=device_array(skin_joints[sparse_ids].T, jnp.int32),
         sparse_skin_weights=f(skin_weights[sparse_ids].T),
-        vertex_joint_slots=jnp.asarray(slots[:num_vertex_joints], dtype=jnp.int32),
-        landmark_slots=jnp.asarray(slots[num_vertex_joints:].reshape(-1, 3), dtype=jnp.int32),
+        vertex_joint_slots=device_array(slots[:num_vertex_joints], jnp.int32),
+        landmark_slots=device_array(slots[num_vertex_joints:].reshape(-1, 3), jnp.int32),
         landmark_bary=f(arrays["lmk_bary_coords"]),
         parents=tuple(int(p) for p in arrays["parents"]),
         num_betas=num_betas,

@@ -140,6 +140,22 @@ def interrupted_at_chunk(monkeypatch, index: int, stop=_ctrl_c):
         monkeypatch.setattr(job, "solve_chunk", solve)
 
 
+@contextlib.contextmanager
+def programs_lowered():
+    """Within the block, a list with an entry for each program JAX lowers (none for a program it holds already)."""
+    lowered = []
+
+    def count(event, seconds, **kwargs):
+        if event == "/jax/core/compile/jaxpr_to_mlir_module_duration":
+            lowered.append(event)
+
+    jax.monitoring.register_event_duration_secs_listener(count)
+    try:
+        yield lowered
+    finally:
+        jax.monitoring.unregister_event_duration_listener(count)
+
+
 def temporary_files(folder: Path) -> list[Path]:
     """What an atomic write leaves behind if it is cut short (`smplx_jax.io.atomic_path`'s names)."""
     return [p for p in folder.rglob(".*") if ".tmp" in p.name]

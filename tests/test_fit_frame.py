@@ -12,9 +12,10 @@ import optimistix as optx
 import pytest
 
 import smplx_jax
-from conftest import jit_fast_compile
+from conftest import jit_fast_compile, programs_lowered
 from fit64 import load64, synthetic64
 from jaxmocap.integrate import fit_frame, fitting, keypoints, least_squares, levenberg_marquardt
+from random_model import random_model_arrays
 from smplx_jax import constants
 
 OPENPOSE = np.asarray(constants.OPENPOSE67_FROM_SMPLX)
@@ -73,6 +74,25 @@ def test_keypoint_constants_are_built_once_and_never_traced(model_dir):
     np.testing.assert_allclose(inside, km.reach.sum(), rtol=1e-6)
     traced = jax.jit(lambda m: keypoints.keypoint_model(m, index).reach.sum())(model)
     np.testing.assert_allclose(traced, inside, rtol=1e-6)
+
+
+def test_a_model_file_and_its_keypoint_constants_lower_few_programs(tmp_path):
+    """Loading a model file lowers no program (NumPy converts its arrays), and a concrete model's keypoint constants
+    lower one program, not one for each of their ~30 operations (in a new process each is read back from the compile
+    cache: 0.75 s for a run's three keypoint sets), and hold what those operations give one by one."""
+    (tmp_path / "smplx").mkdir()
+    np.savez(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz", **random_model_arrays(seed=5))
+    index = np.array([0, 4, 7, 60])  # a set no other test builds: its program is new to this process
+    with programs_lowered() as lowered:
+        model = smplx_jax.load_model(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz")
+        loading = len(lowered)
+        km = keypoints.keypoint_model(model, index)
+    assert (loading, len(lowered) - loading) == (0, 1)
+    with jax.ensure_compile_time_eval():
+        one_by_one = keypoints._keypoint_model(model, index)
+    assert jax.tree.structure(km) == jax.tree.structure(one_by_one) and km.pose_correctives
+    for ours, theirs in zip(jax.tree.leaves(km), jax.tree.leaves(one_by_one)):
+        np.testing.assert_allclose(ours, theirs, rtol=1e-6, atol=1e-6)
 
 
 @pytest.mark.parametrize("focal", [None, 1500.0])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import smplx_jax
-from conftest import jit_fast_compile, load
+from conftest import jit_fast_compile, load, programs_lowered
 from params_util import random_params
 
 
@@ -47,21 +47,12 @@ def test_an_eager_call_runs_one_compiled_program(default_model_dir):
         (rot.rotvec_to_rotmat, rotvecs), (rot.rotvec_to_quat, rotvecs), (rot.rotmat_to_rotvec, rotmats),
         (rot.rotmat_to_quat, rotmats), (rot.rotmat_to_rot6d, rotmats), (rot.quat_to_rotvec, quats),
         (rot.quat_to_rotmat, quats), (rot.rot6d_to_rotmat, np.asarray(rot.rotmat_to_rot6d(rotmats))))]
-    lowered = []
-
-    def count(event, seconds, **kwargs):
-        if event == "/jax/core/compile/jaxpr_to_mlir_module_duration":
-            lowered.append(event)
-
-    jax.monitoring.register_event_duration_secs_listener(count)
-    try:
-        counts = []
+    counts = []
+    with programs_lowered() as lowered:
         for call in calls * 2:
             before = len(lowered)
             jax.block_until_ready(call())
             counts.append(len(lowered) - before)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(count)
     assert counts == [1] * len(calls) + [0] * len(calls), counts
 
 

@@ -30,6 +30,7 @@ from jaxtyping import Array, Float, Int
 import smplx_jax
 from jaxmocap.integrate import mat3
 from smplx_jax import BodyModel, SMPLXParams
+from smplx_jax.model import device_array
 from smplx_jax.pytree import pytree_dataclass
 
 NUM_VERTEX_JOINTS = 21
@@ -69,8 +70,7 @@ class KeypointModel:
 def _trimmed_body(model: BodyModel) -> BodyModel:
     """The same model with only the vertex-joint vertices kept (face landmarks are not fitted)."""
     slots = model.vertex_joint_slots
-    k = model.sparse_ids.shape[0]
-    cols = (jnp.arange(3)[:, None] * k + slots).ravel()  # coordinate-major columns of those vertices
+    cols = _columns(model, slots)
     return dataclasses.replace(
         model,
         sparse_ids=model.sparse_ids[slots],
@@ -79,9 +79,14 @@ def _trimmed_body(model: BodyModel) -> BodyModel:
         sparse_posedirs_cm=model.sparse_posedirs_cm[:, cols],
         sparse_skin_joints=model.sparse_skin_joints[:, slots],
         sparse_skin_weights=model.sparse_skin_weights[:, slots],
-        vertex_joint_slots=jnp.arange(slots.shape[0], dtype=jnp.int32),
+        vertex_joint_slots=device_array(np.arange(slots.shape[0]), jnp.int32),
         landmark_slots=jnp.zeros_like(model.landmark_slots),
     )
+
+
+def _columns(model: BodyModel, slots):
+    """The coordinate-major columns of the sparse vertices in ``slots`` (the sparse arrays' vertex order)."""
+    return (np.arange(3)[:, None] * model.sparse_ids.shape[0] + slots).ravel()
 
 
 def _known(a) -> np.ndarray | None:
@@ -115,12 +120,26 @@ def keypoint_model(model: BodyModel, index) -> KeypointModel:
     ref, km = _BUILT.get(key, (None, None))
     if ref is None or ref() is not model:
         with jax.ensure_compile_time_eval():  # concrete constants, even when first asked for inside a trace
-            km = _keypoint_model(model, index)
+            km = _built(model, key[1], _concrete_structure(model))
         _BUILT[key] = (weakref.ref(model, lambda _, key=key: _BUILT.pop(key, None)), km)
     return km
 
 
-def _keypoint_model(model: BodyModel, index: np.ndarray) -> KeypointModel:
+def _concrete_structure(model: BodyModel) -> tuple[bool, tuple[tuple[int, ...], tuple[int, ...]]]:
+    """What `_keypoint_model` reads from a concrete model's values: whether the vertex joints have pose blend
+    shapes, and their skinning influences that carry weight."""
+    slots = np.asarray(model.vertex_joint_slots)
+    return (bool(np.any(np.asarray(model.sparse_posedirs_cm)[:, _columns(model, slots)])),
+            _blended_pairs(np.asarray(model.sparse_skin_weights)[:, slots]))
+
+
+# A concrete model's constants as one program: as the ~30 small eager operations they took, each read back from
+# the compile cache in a new process, 0.6 s for the run's three keypoint sets.
+_built = jax.jit(lambda model, index, structure: _keypoint_model(model, np.asarray(index), structure),
+                 static_argnums=(1, 2))
+
+
+def _keypoint_model(model: BodyModel, index: np.ndarray, structure=None) -> KeypointModel:
     nj = len(model.parents)
     if index.ndim != 1 or index.min() < 0 or index.max() >= nj + NUM_VERTEX_JOINTS:
         raise ValueError(f"keypoint indices must be skeleton joints (0..{nj - 1}) or vertex joints "
@@ -134,28 +153,30 @@ def _keypoint_model(model: BodyModel, index: np.ndarray) -> KeypointModel:
             j = model.parents[j]
     body = _trimmed_body(model)
     nb = model.num_betas
-    skeleton = jnp.asarray(index[:, None] == np.arange(nj), dtype)  # (K, 55) one-hot
-    vertex = jnp.asarray(index[:, None] == nj + np.arange(NUM_VERTEX_JOINTS), dtype)  # (K, 21) one-hot
+    skeleton = index[:, None] == np.arange(nj)  # (K, 55) one-hot
+    vertex = index[:, None] == nj + np.arange(NUM_VERTEX_JOINTS)  # (K, 21) one-hot
     vertex_skin = model.weights_t[:, body.sparse_ids].T  # (21, 55)
-    skin = skeleton + vertex @ vertex_skin  # (K, 55)
-    reach = skin @ jnp.asarray(ancestors.T, dtype)
+    skin = device_array(skeleton, dtype) + device_array(vertex, dtype) @ vertex_skin  # (K, 55)
+    reach = skin @ device_array(ancestors.T, dtype)
     joint_sd = model.joint_shapedirs[..., :nb]  # (55, 3, B)
     def cm(a):  # (N, 3, B) -> (3, B, N)
         return jnp.transpose(a, (1, 2, 0))
     posedirs = body.sparse_posedirs_cm.reshape(nj - 1, 3, 3, 3 * NUM_VERTEX_JOINTS)  # rows (joint, r, c)
     posedirs = jnp.transpose(posedirs, (1, 2, 0, 3)).reshape(9 * (nj - 1), 3 * NUM_VERTEX_JOINTS)
-    known_posedirs = _known(posedirs)
-    blended = _blended_pairs(body.sparse_skin_weights)
-    anc = jnp.asarray(ancestors, dtype)
+    if structure is None:
+        known_posedirs = _known(posedirs)
+        structure = known_posedirs is None or bool(np.any(known_posedirs)), _blended_pairs(body.sparse_skin_weights)
+    pose_correctives, blended = structure
+    anc = device_array(ancestors, dtype)
     joints = body.sparse_skin_joints
     return KeypointModel(
-        body=body, index=jnp.asarray(index, jnp.int32), reach=reach, reach2=reach**2, ancestors=anc,
+        body=body, index=device_array(index, jnp.int32), reach=reach, reach2=reach**2, ancestors=anc,
         joint_shapedirs=cm(joint_sd), parent_shapedirs=cm(joint_sd[np.maximum(np.asarray(model.parents), 0)]),
         vertex_shapedirs=body.sparse_shapedirs_cm[:nb].reshape(nb, 3, NUM_VERTEX_JOINTS).transpose(1, 0, 2),
-        posedirs=posedirs, pose_correctives=known_posedirs is None or bool(np.any(known_posedirs)),
-        vertex_select=vertex.T, vertex_skin=vertex_skin, blended=blended,
+        posedirs=posedirs, pose_correctives=pose_correctives,
+        vertex_select=device_array(vertex.T, dtype), vertex_skin=vertex_skin, blended=blended,
         blended_reach=anc[:, joints[blended]] - anc[:, joints[0, np.asarray(blended[1], int)]],
-        blended_select=vertex.T[np.asarray(blended[1], int)])
+        blended_select=device_array(vertex.T[np.asarray(blended[1], int)], dtype))
 
 
 def params_of(pose_rotvecs: Float[Array, "55 3"], betas: Float[Array, "B"], num_expression: int) -> SMPLXParams:
