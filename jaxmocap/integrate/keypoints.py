@@ -111,8 +111,7 @@ _BUILT: dict[tuple, tuple[weakref.ref, KeypointModel]] = {}  # (id(model), index
 def keypoint_model(model: BodyModel, index) -> KeypointModel:
     """The fit's constants for keypoints ``index`` (a static sequence of indices into the 127 output joints:
     skeleton joints 0..54 and vertex joints 55..75). Works on a traced model too (inside `jax.jit`). Built once
-    per concrete model and index (some 50 ms of small eager operations: a fit of one frame took 43 ms, 30 of them
-    here)."""
+    per concrete model and index, as one program (`_built`)."""
     index = np.asarray(index, dtype=np.int64)
     if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(model)):
         return _keypoint_model(model, index)  # a traced model: its constants belong to that trace
@@ -133,13 +132,15 @@ def _concrete_structure(model: BodyModel) -> tuple[bool, tuple[tuple[int, ...], 
             _blended_pairs(np.asarray(model.sparse_skin_weights)[:, slots]))
 
 
-# A concrete model's constants as one program: as the ~30 small eager operations they took, each read back from
-# the compile cache in a new process, 0.6 s for the run's three keypoint sets.
+# A concrete model's constants as one program. As ~30 eager operations, each a program that a new process read back
+# from the compile cache, a run's three keypoint sets took 0.75-0.86 s; as one program each, 0.33 s.
 _built = jax.jit(lambda model, index, structure: _keypoint_model(model, np.asarray(index), structure),
                  static_argnums=(1, 2))
 
 
 def _keypoint_model(model: BodyModel, index: np.ndarray, structure=None) -> KeypointModel:
+    """``structure``: `_concrete_structure` of the model (`_built` traces it, so cannot read its values); None reads
+    it from the values where they are known (all influences and pose blend shapes where traced)."""
     nj = len(model.parents)
     if index.ndim != 1 or index.min() < 0 or index.max() >= nj + NUM_VERTEX_JOINTS:
         raise ValueError(f"keypoint indices must be skeleton joints (0..{nj - 1}) or vertex joints "
