@@ -15,7 +15,7 @@ from jaxtyping import Array, Float, Int
 
 from smplx_jax import constants
 from smplx_jax.forward import _posed_points, _skin, _skinning_transforms, kinematic_chain
-from smplx_jax.model import BodyModel
+from smplx_jax.model import BodyModel, device_array
 from smplx_jax.params import Side
 from smplx_jax.pytree import pytree_dataclass
 from smplx_jax.rotations import rotvec_to_rotmat
@@ -54,7 +54,7 @@ def hand_model(model: BodyModel, side: Side) -> HandModel:
     hand_joints = np.array((wrist,) + fingers)
     tips = np.array(constants.VERTEX_JOINT_IDS[11:16] if side == "left" else constants.VERTEX_JOINT_IDS[16:21])
 
-    weights = np.asarray(model.weights)
+    weights = np.asarray(model.weights_t).T
     dominant = np.argmax(weights, axis=1)
     vertex_ids = np.union1d(np.flatnonzero(np.isin(dominant, hand_joints)), tips)
     hand_weights = weights[vertex_ids][:, hand_joints]
@@ -69,17 +69,18 @@ def hand_model(model: BodyModel, side: Side) -> HandModel:
     cols = (np.arange(3)[:, None] * model.num_vertices + vertex_ids).ravel()  # coordinate-major columns
     index = {j: i for i, j in enumerate(hand_joints)}
     parents = (-1,) + tuple(index[model.parents[j]] for j in fingers)
-    dtype = model.v_template.dtype
+    dtype = model.template_cm.dtype
+    # (cut by NumPy: as JAX operations, each would be a program of its own)
     return HandModel(
-        vertex_ids=jnp.asarray(vertex_ids, jnp.int32),
-        faces=jnp.asarray(hand_faces, jnp.int32),
-        template_cm=model.template_cm[:, vertex_ids],
-        shapedirs_cm=model.shapedirs_cm[: model.num_betas, cols],
-        posedirs_cm=jnp.asarray(np.asarray(model.posedirs_cm)[feature_rows][:, cols], dtype),
-        weights_t=jnp.asarray(hand_weights.T, dtype),
-        joint_template=model.joint_template[hand_joints],
-        joint_shapedirs=model.joint_shapedirs[hand_joints][..., : model.num_betas],
-        tip_slots=jnp.asarray(np.searchsorted(vertex_ids, tips), jnp.int32),
+        vertex_ids=device_array(vertex_ids, jnp.int32),
+        faces=device_array(hand_faces, jnp.int32),
+        template_cm=device_array(np.asarray(model.template_cm)[:, vertex_ids], dtype),
+        shapedirs_cm=device_array(np.asarray(model.shapedirs_cm)[: model.num_betas, cols], dtype),
+        posedirs_cm=device_array(np.asarray(model.posedirs_cm)[feature_rows][:, cols], dtype),
+        weights_t=device_array(hand_weights.T, dtype),
+        joint_template=device_array(np.asarray(model.joint_template)[hand_joints], dtype),
+        joint_shapedirs=device_array(np.asarray(model.joint_shapedirs)[hand_joints][..., : model.num_betas], dtype),
+        tip_slots=device_array(np.searchsorted(vertex_ids, tips), jnp.int32),
         parents=parents,
     )
 

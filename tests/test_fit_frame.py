@@ -76,15 +76,17 @@ def test_keypoint_constants_are_built_once_and_never_traced(model_dir):
     np.testing.assert_allclose(traced, inside, rtol=1e-6)
 
 
-def test_a_model_file_and_its_keypoint_constants_lower_few_programs(tmp_path):
-    """Loading a model file lowers no program (NumPy converts its arrays), and a concrete model's keypoint constants
-    lower one program, not one for each of their ~30 operations (in a new process each is read back from the compile
-    cache: 0.75 s for a run's three keypoint sets), and hold what those operations give one by one."""
+def test_a_model_file_its_hands_and_keypoint_constants_lower_few_programs(tmp_path):
+    """Loading a model file and cutting a hand model from it lower no program (NumPy converts and cuts the arrays),
+    and a concrete model's keypoint constants lower one program, not one for each of their ~30 operations (in a new
+    process each is read back from the compile cache: 0.75 s for a run's three keypoint sets), and hold what those
+    operations give one by one."""
     (tmp_path / "smplx").mkdir()
     np.savez(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz", **random_model_arrays(seed=5))
     index = np.array([0, 4, 7, 60])  # a set no other test builds: its program is new to this process
     with programs_lowered() as lowered:
         model = smplx_jax.load_model(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz")
+        smplx_jax.hand_model(model, "left")
         loading = len(lowered)
         km = keypoints.keypoint_model(model, index)
     assert (loading, len(lowered) - loading) == (0, 1)
