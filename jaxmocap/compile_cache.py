@@ -103,7 +103,12 @@ class _DiskJit:
             except (TypeError, ValueError, NotImplementedError):  # effects, trees that cannot be written
                 return None
             _write(path, sorted((cls.__module__, cls.__qualname__) for cls in types), blob)
-        return jax.jit(lambda dynamic: exported.call(**dynamic))
+
+        def program(dynamic):
+            return exported.call(**dynamic)
+
+        program.__name__ = program.__qualname__ = self.fun.__name__  # JAX's logs and profiles name the function
+        return jax.jit(program)
 
 
 def _avals_and_platform(leaves) -> tuple[tuple, str | None]:

@@ -78,6 +78,7 @@ def test_one_file_per_structure_shape_dtype_and_static_value(programs):
     held = first._cache_size()  # (the jit above's program too: JAX's cache is the function's)
     assert equal(first(x, y, n=2), expected)
     assert len(traces) == 2 and len(files(programs)) == 1 and first._cache_size() == held + 1
+    assert [p.__name__ for p in first.programs.values()] == ["scaled"]  # as JAX's compile logs and profiles name it
     first(x + 1, y, 2)  # other values, the static one by position: the same program
     assert len(traces) == 2 and first._cache_size() == held + 1
     again = disk_jit(scaled, static_argnames="n")  # as in a new process: nothing in memory
