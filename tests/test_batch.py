@@ -228,38 +228,66 @@ def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, r
     assert seconds < 0.25 * first_seconds, (seconds, first_seconds)
 
 
-@pytest.mark.parametrize("stop, code, note", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")])
-def test_ctrl_c_or_sigterm_stops_the_batch_cleanly(ray_env, tmp_path, stop, code, note):
-    """SIGINT (Ctrl-C), or SIGTERM (``kill``, a job scheduler; Ray's own handler would end the batch at once),
-    mid-video: exit 130 or 143 with a one-line note, the video listed as stopped in batch.json, its stored chunks
-    kept for the next call, nothing half-written, and the local Ray (which listened on 127.0.0.1 alone) gone.
-    Frames 20-100 (twenty chunks of the same shapes), so that the video is still running when the signal comes
-    (with frames 20-60, a suite run on three workers once saw the video finish first). Started as from a terminal
-    (`conftest.cli_as_from_a_terminal`): in a suite run as a background job the batch otherwise ignored SIGINT and
-    finished the video (exit 0)."""
-    env, _ = ray_env
-    out = tmp_path / "out"
+def stopped_mid_video(out: Path, env: dict, stop: int, *args: str, while_running=lambda batch: None):
+    """``jaxmocap batch CLIP ARGS`` on frames 20-100 (twenty chunks of the same shapes, so that the video is still
+    running when the signal comes: with frames 20-60, a suite run on three workers once saw the video finish first),
+    sent ``stop`` once its video has started and ``while_running(batch process)`` has looked: ``(exit code,
+    stderr, what while_running returned)``. Started as from a terminal (`conftest.cli_as_from_a_terminal`): in a
+    suite run as a background job the batch otherwise ignored SIGINT and finished the video (exit 0)."""
     options = [*OPTIONS[:3], "100", *OPTIONS[4:]]
-    batch = subprocess.Popen(cli_as_from_a_terminal("batch", str(CLIP), "--out", str(out), "--workers", "1", *options),
+    batch = subprocess.Popen(cli_as_from_a_terminal("batch", str(CLIP), "--out", str(out), *args, *options),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         wait_for(lambda: (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists(), 300, "the video to start")
-        ray_processes = psutil.Process(batch.pid).children(recursive=True)
-        listening = [c.laddr.ip for p in ray_processes for c in p.net_connections("inet") if c.status == "LISTEN"]
-        assert listening and set(listening) <= set(LOOPBACK), listening
+        seen = while_running(batch)
         batch.send_signal(stop)
-        stdout, stderr = batch.communicate(timeout=180)
+        _, stderr = batch.communicate(timeout=180)
     finally:
         batch.kill()
-    assert batch.returncode == code, (stdout, stderr)
+    return batch.returncode, stderr, seen
+
+
+def assert_stopped_cleanly(out: Path, code: int, stderr: str, expected_code: int, note: str) -> None:
+    """The exit code and one-line note, the video listed as stopped in batch.json, its stored chunks kept for the
+    next call, nothing half-written."""
+    assert code == expected_code, stderr
     assert stderr.strip().splitlines()[-1] == f"jaxmocap batch: {note}; run the same command again to resume"
     assert "Traceback" not in stderr
     assert not temporary_files(out) and not (out / CLIP.stem / "motion.npz").exists()
     assert (out / CLIP.stem / ".jaxmocap_chunks" / "settings.json").exists()
     (row,) = ledger(out)
     assert (row["status"], row["error"], row["frames"]) == ("stopped", STOPPED, None), row
+
+
+def test_ctrl_c_stops_a_batch_on_its_own_ray_cleanly(ray_env, tmp_path):
+    """SIGINT (Ctrl-C) mid-video: exit 130 with a one-line note, the video stopped (`assert_stopped_cleanly`), and
+    the batch's own Ray, which listened on 127.0.0.1 alone, gone."""
+    def listening_on_loopback(batch):
+        ray_processes = psutil.Process(batch.pid).children(recursive=True)
+        listening = [c.laddr.ip for p in ray_processes for c in p.net_connections("inet") if c.status == "LISTEN"]
+        assert listening and set(listening) <= set(LOOPBACK), listening
+        return ray_processes
+
+    code, stderr, ray_processes = stopped_mid_video(tmp_path / "out", ray_env[0], signal.SIGINT, "--workers", "1",
+                                                    while_running=listening_on_loopback)
+    assert_stopped_cleanly(tmp_path / "out", code, stderr, 130, "interrupted")
     wait_for(lambda: not any(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in ray_processes), 30,
              "the local Ray to stop")
+
+
+def test_sigterm_stops_a_batch_on_a_cluster_and_leaves_the_cluster_running(ray_head, ray_env, tmp_path):
+    """SIGTERM (``kill``, a job scheduler; Ray's own handler would end the batch at once) to a batch joined to a
+    cluster (``--address``) mid-video: exit 143 with a one-line note, the video stopped (`assert_stopped_cleanly`),
+    its task on the cluster's worker cancelled, and the cluster still running for its other users."""
+    address, head_pid = ray_head
+    head_dir = ray_env[1] / "head"
+    before = {p.pid for p in processes_in(head_dir)}
+    code, stderr, worker = stopped_mid_video(
+        tmp_path / "out", ray_env[0], signal.SIGTERM, "--address", address,
+        while_running=lambda batch: wait_for(lambda: task_process(descending_from=head_pid), 60, "the task"))
+    assert_stopped_cleanly(tmp_path / "out", code, stderr, 143, "terminated")
+    wait_for(lambda: task_process(descending_from=head_pid) is None, 60, "the cancelled task to end")
+    assert psutil.pid_exists(head_pid) and before <= {p.pid for p in processes_in(head_dir)}
 
 
 def test_batch_without_ray_says_how_to_install_it(monkeypatch, tmp_path, capsys):
