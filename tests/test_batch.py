@@ -1,6 +1,7 @@
 """``jaxmocap batch`` on Ray: bad inputs fail alone, a killed worker's video is retried to the same result, a
-cluster is joined at its address, Ctrl-C stops cleanly, outputs equal separate runs, a second call rewrites
-nothing; and the run and live modes import one way.
+cluster is joined at its address, Ctrl-C stops a batch on its own Ray and SIGTERM one on a cluster cleanly (the
+cluster left running), outputs equal separate runs, a second call rewrites nothing; and the run and live modes
+import one way.
 
 Every batch runs the CLI in a process of its own (as a user would; Ray's state stays out of pytest's), on frames
 20-28 of the bundled clip in chunks of 4 (tests/test_pipeline.py's shapes: the suite compiles them once, in its
