@@ -282,13 +282,14 @@ def test_sigterm_stops_a_batch_on_a_cluster_and_leaves_the_cluster_running(ray_h
     its task on the cluster's worker cancelled, and the cluster still running for its other users."""
     address, head_pid = ray_head
     head_dir = ray_env[1] / "head"
-    before = {p.pid for p in processes_in(head_dir)}
-    code, stderr, worker = stopped_mid_video(
+    servers = [p for p in processes_in(head_dir) if p.name() in ("gcs_server", "raylet")]
+    code, stderr, _ = stopped_mid_video(
         tmp_path / "out", ray_env[0], signal.SIGTERM, "--address", address,
         while_running=lambda batch: wait_for(lambda: task_process(descending_from=head_pid), 60, "the task"))
     assert_stopped_cleanly(tmp_path / "out", code, stderr, 143, "terminated")
     wait_for(lambda: task_process(descending_from=head_pid) is None, 60, "the cancelled task to end")
-    assert psutil.pid_exists(head_pid) and before <= {p.pid for p in processes_in(head_dir)}
+    assert len(servers) == 2
+    assert all(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in [psutil.Process(head_pid), *servers])
 
 
 def test_batch_without_ray_says_how_to_install_it(monkeypatch, tmp_path, capsys):
