@@ -124,12 +124,18 @@ def keypoint_model(model: BodyModel, index) -> KeypointModel:
     return km
 
 
+def _structure(posedirs_cm, skin_weights) -> tuple[bool, tuple[tuple[int, ...], tuple[int, ...]]]:
+    """What `_keypoint_model` reads from the vertex joints' values (all is assumed where they are traced): whether
+    they have pose blend shapes, and their skinning influences that carry weight (`_blended_pairs`)."""
+    known = _known(posedirs_cm)
+    return known is None or bool(np.any(known)), _blended_pairs(skin_weights)
+
+
 def _concrete_structure(model: BodyModel) -> tuple[bool, tuple[tuple[int, ...], tuple[int, ...]]]:
-    """What `_keypoint_model` reads from a concrete model's values: whether the vertex joints have pose blend
-    shapes, and their skinning influences that carry weight."""
+    """`_structure` of a concrete model, its vertex joints cut by NumPy (as JAX operations, programs of their own)."""
     slots = np.asarray(model.vertex_joint_slots)
-    return (bool(np.any(np.asarray(model.sparse_posedirs_cm)[:, _columns(model, slots)])),
-            _blended_pairs(np.asarray(model.sparse_skin_weights)[:, slots]))
+    return _structure(np.asarray(model.sparse_posedirs_cm)[:, _columns(model, slots)],
+                      np.asarray(model.sparse_skin_weights)[:, slots])
 
 
 # A concrete model's constants as one program. As ~30 eager operations, each a program that a new process read back
@@ -139,8 +145,8 @@ _built = jax.jit(lambda model, index, structure: _keypoint_model(model, np.asarr
 
 
 def _keypoint_model(model: BodyModel, index: np.ndarray, structure=None) -> KeypointModel:
-    """``structure``: `_concrete_structure` of the model (`_built` traces it, so cannot read its values); None reads
-    it from the values where they are known (all influences and pose blend shapes where traced)."""
+    """``structure``: `_concrete_structure` of the model (`_built` traces it, so cannot read its values); None:
+    `_structure` of its trimmed body."""
     nj = len(model.parents)
     if index.ndim != 1 or index.min() < 0 or index.max() >= nj + NUM_VERTEX_JOINTS:
         raise ValueError(f"keypoint indices must be skeleton joints (0..{nj - 1}) or vertex joints "
@@ -164,10 +170,8 @@ def _keypoint_model(model: BodyModel, index: np.ndarray, structure=None) -> Keyp
         return jnp.transpose(a, (1, 2, 0))
     posedirs = body.sparse_posedirs_cm.reshape(nj - 1, 3, 3, 3 * NUM_VERTEX_JOINTS)  # rows (joint, r, c)
     posedirs = jnp.transpose(posedirs, (1, 2, 0, 3)).reshape(9 * (nj - 1), 3 * NUM_VERTEX_JOINTS)
-    if structure is None:
-        known_posedirs = _known(posedirs)
-        structure = known_posedirs is None or bool(np.any(known_posedirs)), _blended_pairs(body.sparse_skin_weights)
-    pose_correctives, blended = structure
+    pose_correctives, blended = (_structure(body.sparse_posedirs_cm, body.sparse_skin_weights) if structure is None
+                                 else structure)
     anc = device_array(ancestors, dtype)
     joints = body.sparse_skin_joints
     return KeypointModel(
