@@ -9,20 +9,20 @@ from pathlib import Path
 
 from jaxmocap.compile_cache import use_compilation_cache
 from jaxmocap.errors import InputError
-from jaxmocap.signals import handling
+from jaxmocap.signals import Terminated, handling, interrupts_kept
 
 
 @contextlib.contextmanager
 def _sigterm_interrupts():
     """Inside, SIGTERM (``kill``, ``timeout``, a job scheduler or container stopping the command) raises
-    KeyboardInterrupt where Ctrl-C would, so that it stops a command as cleanly (atomic writes rolled back, stored
-    chunks kept, a batch's videos listed as stopped, a live session's recording written); the list yielded holds the
-    signal once it came, which tells the two apart."""
+    KeyboardInterrupt (`Terminated`) where Ctrl-C would, so that it stops a command as cleanly (atomic writes rolled
+    back, stored chunks kept, a batch's videos listed as stopped, a live session's recording written); the list
+    yielded holds the signal once it came, which tells the two apart."""
     received = []
 
     def interrupt(signum, frame):
         received.append(signum)
-        raise KeyboardInterrupt("SIGTERM")
+        raise Terminated
 
     with handling(interrupt, signal.SIGTERM):
         yield received
@@ -316,7 +316,7 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command != "bench":  # benchmarks time first runs, compilation included
         use_compilation_cache()
-    with _sigterm_interrupts() as terminated:
+    with _sigterm_interrupts() as terminated, interrupts_kept():
         try:
             code = args.run(args)
         except (InputError, ModelFileError, OSError) as err:

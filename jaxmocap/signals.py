@@ -1,8 +1,14 @@
-"""Signal handlers for a block of code, the previous ones put back after it."""
+"""Signal handlers for a block of code, the previous ones put back after it; and Ctrl-C that is never dropped."""
 
+import _thread
 import contextlib
 import signal
+import sys
 import threading
+
+
+class Terminated(KeyboardInterrupt):
+    """The KeyboardInterrupt a SIGTERM raises where a command stops on it as on Ctrl-C (`jaxmocap.cli`)."""
 
 
 @contextlib.contextmanager
@@ -23,3 +29,38 @@ def handling(handler, *signums: signal.Signals):
         for s, old in previous.items():
             if old is not None:  # (None: a handler Python did not set, which it cannot put back)
                 signal.signal(s, old)
+
+
+RESIGNAL_SECONDS = 0.01  # after a dropped interrupt, when it is signalled again
+
+
+@contextlib.contextmanager
+def interrupts_kept():
+    """Inside, a KeyboardInterrupt raised where Python cannot pass it on is raised again. A signal's handler runs
+    at whatever Python code the main thread runs next, which may be a garbage collector's callback (JAX's, after
+    each collection) or a finaliser: Python prints "Exception ignored in ..." and goes on, and Ctrl-C, SIGTERM or
+    Ray's cancel (a SIGINT to the task's thread) is lost while the work runs to its end. Here such an interrupt is
+    signalled again `RESIGNAL_SECONDS` later, from another thread (`Terminated` as SIGTERM, others as SIGINT), so
+    that its handler runs once more, in the code the main thread has gone back to. In the main thread only, as
+    `handling`."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous, timers = sys.unraisablehook, []
+
+    def hook(unraisable):
+        if issubclass(unraisable.exc_type, KeyboardInterrupt):
+            signum = signal.SIGTERM if issubclass(unraisable.exc_type, Terminated) else signal.SIGINT
+            timers.append(threading.Timer(RESIGNAL_SECONDS, _thread.interrupt_main, (signum,)))
+            timers[-1].daemon = True
+            timers[-1].start()
+        else:
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous
+        for timer in timers:  # the block is over: nothing left to stop
+            timer.cancel()
