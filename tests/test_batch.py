@@ -1,7 +1,7 @@
 """``jaxmocap batch`` on Ray: bad inputs fail alone, a killed worker's video is retried to the same result, a
 cluster is joined at its address, Ctrl-C stops a batch on its own Ray and SIGTERM one on a cluster cleanly (the
-cluster left running), outputs equal separate runs, a second call rewrites nothing; and the run and live modes
-import one way.
+cluster left running; a task that lost its first cancel is cancelled again), outputs equal separate runs, a second
+call rewrites nothing; and the run and live modes import one way.
 
 Every batch runs the CLI in a process of its own (as a user would; Ray's state stays out of pytest's), on frames
 20-28 of the bundled clip in chunks of 4 (tests/test_pipeline.py's shapes: the suite compiles them once, in its
@@ -290,6 +290,46 @@ def test_sigterm_stops_a_batch_on_a_cluster_and_leaves_the_cluster_running(ray_h
     wait_for(lambda: task_process(descending_from=head_pid) is None, 60, "the cancelled task to end")
     assert len(servers) == 2
     assert all(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in [psutil.Process(head_pid), *servers])
+
+
+STUBBORN = """
+import sys, time
+from pathlib import Path
+from jaxmocap.batch.cluster import connect
+from jaxmocap.batch.schedule import CANCEL_EVERY, stop
+
+ray = connect(sys.argv[1], None)
+running = Path(sys.argv[2])
+
+@ray.remote(max_retries=0)
+def stubborn():
+    running.touch()
+    lost = False  # the first Ctrl-C is lost, as in a library that catches it
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        try:
+            time.sleep(0.01)
+        except KeyboardInterrupt:
+            if lost:
+                raise
+            lost = True
+    return "ran to its end"
+
+ref = stubborn.remote()
+while not running.exists():
+    time.sleep(0.01)
+started = time.monotonic()
+assert stop(ray, [ref]) == []  # no result: cancelled
+assert time.monotonic() - started < 3 * CANCEL_EVERY
+"""
+
+
+def test_a_task_that_loses_its_first_cancel_is_cancelled_again(ray_head, ray_env, tmp_path):
+    """`schedule.stop` sends the cancel again while a task runs: a Ctrl-C lost in the task (its handler ran inside
+    a library that caught it) does not let the video run to its end."""
+    proc = subprocess.run([sys.executable, "-c", STUBBORN, ray_head[0], str(tmp_path / "running")],
+                          capture_output=True, text=True, env=ray_env[0], timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
 
 
 def test_batch_without_ray_says_how_to_install_it(monkeypatch, tmp_path, capsys):

@@ -17,6 +17,7 @@ from jaxmocap.batch.videos import folder_names, resolved
 from jaxmocap.pipeline.config import RunConfig
 
 STOP_SECONDS = 60.0  # how long cancelled tasks get to roll back before their workers are killed
+CANCEL_EVERY = 1.0  # seconds between the cancels sent to a task still running
 
 
 @dataclass(frozen=True)
@@ -140,11 +141,18 @@ def outcome(ray, ref, video: Video, submitted: float, retries: int) -> VideoReco
 
 def stop(ray, refs: list) -> list:
     """Cancel the tasks ``refs`` (Ctrl-C in each: its atomic writes roll back, its stored chunks stay) and wait for
-    them, `STOP_SECONDS` at most before killing their workers; the refs that finished with a result meanwhile."""
-    for ref in refs:
-        ray.cancel(ref)
-    ended, _ = ray.wait(refs, num_returns=len(refs), timeout=STOP_SECONDS) if refs else ([], [])
-    for ref in set(refs) - set(ended):
+    them, `STOP_SECONDS` at most before killing their workers; the refs that finished with a result meanwhile. The
+    cancel is sent again every `CANCEL_EVERY` seconds to the tasks still running: a task's Ctrl-C can be lost where
+    it lands (a library that catches it; a C extension being imported turns it into an ImportError), and its video
+    would then run to its end."""
+    deadline, running, ended = time.monotonic() + STOP_SECONDS, list(refs), []
+    while running and time.monotonic() < deadline:
+        for ref in running:
+            ray.cancel(ref)
+        done, running = ray.wait(running, num_returns=len(running),
+                                 timeout=max(min(CANCEL_EVERY, deadline - time.monotonic()), 0.0))
+        ended += done
+    for ref in running:
         ray.cancel(ref, force=True)
     return [ref for ref in ended if _has_result(ray, ref)]
 
