@@ -1,4 +1,5 @@
-"""Signal handlers for a block of code, the previous ones put back after it; and Ctrl-C that is never dropped."""
+"""Signal handlers for a block of code, the previous ones put back after it; Ctrl-C that is never dropped; work
+that Ctrl-C (or Ray's cancel) stops whatever the process inherited."""
 
 import _thread
 import contextlib
@@ -64,3 +65,12 @@ def interrupts_kept():
         sys.unraisablehook = previous
         for timer in timers:  # the block is over: nothing left to stop
             timer.cancel()
+
+
+@contextlib.contextmanager
+def cancellable():
+    """Inside, Ctrl-C raises KeyboardInterrupt (Python's own handler, even where the process inherited SIGINT
+    ignored, as everything started from a background job or ``nohup`` does, Ray's workers included: Ray cancels a
+    running task by a SIGINT to it) and is never dropped (`interrupts_kept`)."""
+    with handling(signal.default_int_handler, signal.SIGINT), interrupts_kept():
+        yield

@@ -297,22 +297,24 @@ import sys, time
 from pathlib import Path
 from jaxmocap.batch.cluster import connect
 from jaxmocap.batch.schedule import CANCEL_EVERY, stop
+from jaxmocap.signals import cancellable
 
 ray = connect(sys.argv[1], None)
 running = Path(sys.argv[2])
 
 @ray.remote(max_retries=0)
 def stubborn():
-    running.touch()
-    lost = False  # the first Ctrl-C is lost, as in a library that catches it
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        try:
-            time.sleep(0.01)
-        except KeyboardInterrupt:
-            if lost:
-                raise
-            lost = True
+    with cancellable():  # as `task.run_video`
+        running.touch()
+        lost = False  # the first Ctrl-C is lost, as in a library that catches it
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            try:
+                time.sleep(0.01)
+            except KeyboardInterrupt:
+                if lost:
+                    raise
+                lost = True
     return "ran to its end"
 
 ref = stubborn.remote()

@@ -15,7 +15,7 @@ import pytest
 
 from jaxmocap.batch import task
 from jaxmocap.pipeline import RunConfig
-from jaxmocap.signals import Terminated, handling, interrupts_kept
+from jaxmocap.signals import Terminated, cancellable, handling, interrupts_kept
 
 
 def collect_interrupted(signum: int) -> None:
@@ -97,3 +97,10 @@ def test_a_cancel_landing_in_a_gc_callback_stops_a_batchs_video(monkeypatch, tmp
     monkeypatch.setattr(task, "run", run)
     with pytest.raises(KeyboardInterrupt):
         task.run_video(RunConfig("clip.mp4"), str(tmp_path), str(tmp_path / "mark"), {})
+
+
+def test_cancellable_work_stops_on_ctrl_c_where_sigint_was_inherited_ignored():
+    """A background job's processes (and Ray's workers it starts) inherit SIGINT ignored; Ray's cancel is a SIGINT."""
+    with handling(signal.SIG_IGN, signal.SIGINT), cancellable(), pytest.raises(KeyboardInterrupt):
+        _thread.interrupt_main()
+        go_on()

@@ -11,7 +11,7 @@ from jaxmocap.compile_cache import use_compilation_cache
 from jaxmocap.errors import InputError
 from jaxmocap.io import read_result_npz
 from jaxmocap.pipeline import RunConfig, run
-from jaxmocap.signals import interrupts_kept
+from jaxmocap.signals import cancellable
 from smplx_jax import ModelFileError
 
 
@@ -19,13 +19,13 @@ def run_video(config: RunConfig, out: str, mark: str, key: dict) -> VideoRecord:
     """``run(config, out)``, resumed from its stored chunks if an earlier try stopped, then the mark of the
     finished video (``mark``: its path; ``key``: `ledger.video_key`). Any error of the run is the video's failed
     record with its one-line cause, not an exception: one bad input stops nothing else. Ctrl-C (Ray's cancel)
-    passes through, wherever in the run it lands (`signals.interrupts_kept`), after the run's atomic writes roll
+    passes through, wherever in the run it lands (`signals.cancellable`), after the run's atomic writes roll
     back."""
     use_compilation_cache()  # a program any worker compiled before is read back, not compiled again
     started = time.perf_counter()
     Path(mark).unlink(missing_ok=True)  # the outputs are being rewritten: not finished until marked again
     try:
-        with interrupts_kept():
+        with cancellable():
             report = run(config, out)
     except (InputError, ModelFileError, OSError) as err:
         return VideoRecord.failure(str(config.source), out, str(err), time.perf_counter() - started)
