@@ -1,8 +1,10 @@
 """A Ctrl-C, SIGTERM or Ray's cancel is never dropped: one whose handler runs inside a garbage collector's callback
-(as JAX's runs after each collection) is raised again in ordinary code (`jaxmocap.signals.interrupts_kept`).
+(as JAX's runs after each collection) is raised again in ordinary code (`jaxmocap.signals.interrupts_kept`), and
+`cancellable` work stops on Ctrl-C even where SIGINT was inherited ignored.
 
-A batch's SIGTERM once let the video run to its end: Ray's cancel landed in JAX's callback, and the worker's log
-read "Exception ignored in: <function _xla_gc_callback ...> KeyboardInterrupt".
+A batch's SIGTERM let the video run to its end: its Ray workers, started from a background job, ignored Ray's
+cancel (a SIGINT); and once the cancel landed in JAX's callback (the worker's log: "Exception ignored in: <function
+_xla_gc_callback ...> KeyboardInterrupt").
 """
 
 import _thread
