@@ -52,9 +52,10 @@ def interrupts_kept():
     def hook(unraisable):
         if issubclass(unraisable.exc_type, KeyboardInterrupt):
             signum = signal.SIGTERM if issubclass(unraisable.exc_type, Terminated) else signal.SIGINT
-            timers.append(threading.Timer(RESIGNAL_SECONDS, _thread.interrupt_main, (signum,)))
-            timers[-1].daemon = True
-            timers[-1].start()
+            timer = threading.Timer(RESIGNAL_SECONDS, _thread.interrupt_main, (signum,))
+            timer.daemon = True
+            timer.start()
+            timers.append(timer)
         else:
             previous(unraisable)
 
