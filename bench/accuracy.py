@@ -3,16 +3,23 @@ single-person take, scored against the multi-view 3D reference beside BlazePose'
 landmarks the fit starts from), stage by stage: BlazePose, the IK start, the fit, the smoothed motion (what
 ``jaxmocap run`` writes).
 
-    python bench/accuracy.py [--views cam01 cam03] [--variants mirror rotate90 crop half 30fps] [--out bench/results]
-        [--sheet docs/accuracy_worst_frames.png]    (or: jaxmocap bench --only accuracy)
+    python bench/accuracy.py [--views cam01 cam03] [--variants all | mirror rotate90 roll15 roll30 crop half 30fps pan]
+        [--landmarks heavy full lite] [--out bench/results] [--sheet docs/accuracy_worst_frames.png]
+        (or: jaxmocap bench --only accuracy)
 
 Variants (`--variants`) stand in for the views we don't have: each view's video as another camera would have given
 it (`write_variant`), run and scored the same way against the reference transformed alike (`variant_reference`):
-``mirror`` (left and right swap: the mirrored reference scores it), ``rotate90`` (a phone held sideways), ``crop``
-(the half of the frame around the person), ``half`` (scaled by 0.5), ``30fps`` (every other frame).
+``mirror`` (left and right swap: the mirrored reference scores it), ``rotate90`` (a phone held sideways),
+``roll15``/``roll30`` (a camera held askew: the frame turned by that many degrees about its centre, on a canvas
+that holds all of it), ``crop`` (the half of the frame around the person), ``half`` (scaled by 0.5), ``30fps``
+(every other frame), ``pan`` (a window of three quarters of the width sliding across the frame over the clip: a
+camera that pans). ``--landmarks``: each case is run with each BlazePose landmark model given (`jaxmocap run
+--landmarks`), and the table puts them side by side.
 
 Metrics, per frame where the reference has at least 8 of its 12 limb joints (L/R shoulder, elbow, wrist, hip, knee,
-ankle): PA-MPJPE (mm, after the best similarity transform of that frame), knee and elbow flexion MAE (degrees,
+ankle): PA-MPJPE (mm, after the best similarity transform of that frame), WA-MPJPE (mm, after one similarity
+transform over every scored frame of the clip: depth drift, a wandering root and a changing scale count), knee and
+elbow flexion MAE (degrees,
 alignment-free), acceleration error (mm/frame^2, second differences of the aligned joints against the reference's,
 over three consecutive scored frames); for the motion: frames valid, median and > 40 px share of the 2D
 reprojection error, the frame-to-frame change of the stored rotations (global and body joints, at 60 fps), and the
@@ -53,6 +60,7 @@ FLEXION_TRIPLES = ((6, 8, 10), (7, 9, 11), (0, 2, 4), (1, 3, 5))
 class Score:
     frames_scored: int
     pa_mpjpe_mm: float
+    wa_mpjpe_mm: float
     flexion_mae_deg: float
     accel_error_mm: float
 
@@ -83,6 +91,7 @@ def score(joints: np.ndarray, reference: np.ndarray) -> tuple[Score, np.ndarray]
     for t in np.flatnonzero(scored):
         aligned[t] = procrustes_align(joints[t], np.nan_to_num(reference[t]), present[t])
         per_frame[t] = 1000 * np.mean(np.linalg.norm(aligned[t] - reference[t], axis=-1)[present[t]])
+    wa_mpjpe = whole_clip_error_mm(joints[scored], reference[scored], present[scored])
     flexion_error = np.abs(_flexion_deg(joints) - _flexion_deg(reference))[scored]
     accel = []
     for t in range(1, len(reference) - 1):
@@ -91,8 +100,18 @@ def score(joints: np.ndarray, reference: np.ndarray) -> tuple[Score, np.ndarray]
             a = aligned[t - 1] - 2 * aligned[t] + aligned[t + 1]
             r = reference[t - 1] - 2 * reference[t] + reference[t + 1]
             accel.append(1000 * np.linalg.norm(a - r, axis=-1)[ok])
-    return Score(int(scored.sum()), float(np.nanmean(per_frame)), float(np.nanmean(flexion_error)),
+    return Score(int(scored.sum()), float(np.nanmean(per_frame)), wa_mpjpe, float(np.nanmean(flexion_error)),
                  float(np.mean(np.concatenate(accel))) if accel else float("nan")), per_frame
+
+
+def whole_clip_error_mm(joints: np.ndarray, reference: np.ndarray, present: np.ndarray) -> float:
+    """WA-MPJPE: the mean distance (mm) of ``(T, J, 3)`` joints to the reference after ONE similarity transform
+    of every frame's joints together (over the joints ``present (T, J)``); NaN without any."""
+    if not present.any():
+        return float("nan")
+    aligned = procrustes_align(joints.reshape(-1, 3), np.nan_to_num(reference).reshape(-1, 3), present.ravel())
+    return float(1000 * np.mean(np.linalg.norm(aligned - np.nan_to_num(reference).reshape(-1, 3), axis=-1)
+                                [present.ravel()]))
 
 
 def rotation_changes_deg(global_orient: np.ndarray, body_pose: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -113,7 +132,8 @@ def rotation_coherence(motion: dict) -> dict:
                 global_turn_largest_deg=float(changes[:, 0].max(initial=0.0)))
 
 
-VARIANTS = ("mirror", "rotate90", "crop", "half", "30fps")
+VARIANTS = ("mirror", "rotate90", "roll15", "roll30", "crop", "half", "30fps", "pan")
+PAN_WIDTH = 0.75  # of the frame's width: the window of the ``pan`` variant
 MIRRORED_LIMBS = np.arange(12).reshape(6, 2)[:, ::-1].ravel()  # the reference's left and right exchanged
 
 
@@ -127,21 +147,33 @@ def write_variant(video: Path, kind: str, out: Path, person_x: float) -> Path:
     media, frames = open_media(video, 0, None, 2 if kind == "30fps" else 1)
     width, height = media.size
     left = int(np.clip(person_x - width / 4, 0, width - width // 2))
+    if kind.startswith("roll"):  # turned about the centre onto a canvas holding the whole frame
+        angle = np.radians(float(kind[4:]))
+        size = (int(np.ceil(width * np.cos(angle) + height * np.sin(angle))),
+                int(np.ceil(width * np.sin(angle) + height * np.cos(angle))))
+        turn = cv2.getRotationMatrix2D((width / 2, height / 2), float(kind[4:]), 1.0)
+        turn[:, 2] += (np.asarray(size) - (width, height)) / 2
+    pan = int(PAN_WIDTH * width)
 
-    def transformed(frame):
+    def transformed(index, frame):
         if kind == "mirror":
             return cv2.flip(frame, 1)
         if kind == "rotate90":
             return cv2.rotate(frame, cv2.ROTATE_90_CLOCKWISE)
+        if kind.startswith("roll"):
+            return cv2.warpAffine(frame, turn, size, flags=cv2.INTER_LINEAR)
         if kind == "crop":
             return np.ascontiguousarray(frame[:, left:left + width // 2])
         if kind == "half":
             return cv2.resize(frame, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
+        if kind == "pan":
+            x0 = round((width - pan) * index / max(media.frame_count - 1, 1))
+            return np.ascontiguousarray(frame[:, x0:x0 + pan])
         return frame
 
     writer = None
-    for _, frame in frames:
-        frame = transformed(frame)
+    for index, frame in frames:
+        frame = transformed(index, frame)
         if writer is None:
             writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), media.fps, frame.shape[1::-1])
         writer.write(frame)
@@ -177,7 +209,7 @@ class Stages:
     identities: int  # the people the run found (one in this take)
 
 
-def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
+def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str = "heavy") -> Stages:
     """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before the shape and
     smoothing from what the run itself observed and fitted, chunk by chunk (`run`'s ``observed``): BlazePose's
     world landmarks (left and right put back where the detector exchanged them, as the fit takes them), the IK
@@ -203,7 +235,7 @@ def run_stages(video: Path, work: Path, end: int | None = None) -> Stages:
             part = frames_where(obs.found, mine, part)
         chunks.append(part)
 
-    run(RunConfig(video, end=end, overlay=False, progress=False), work, observed=observed)
+    run(RunConfig(video, end=end, overlay=False, progress=False, landmarks=landmarks), work, observed=observed)
     motion = read_motion(work / "motion.npz")
     blazepose, ik, fitted, keypoints = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
     return Stages(blazepose, motion_arrays(model, ik, keypoints),
@@ -285,56 +317,89 @@ def contact_sheet(path: Path, views: dict, motions: dict, per_frame: dict, count
     cv2.imwrite(str(path), sheet)
 
 
+def side_by_side(results: dict) -> list[str]:
+    """One markdown table of the motion's scores, a row per case and a column group per landmark model: PA-MPJPE,
+    its ratio to that model's BlazePose, WA-MPJPE, the share of joint-frames turning > 45°, identities."""
+    models = list(results)
+    cases = list(dict.fromkeys(case for rows in results.values() for case in rows))
+    head = "| case | " + " | ".join(f"{m}: PA mm (x BlazePose) | WA mm | >45° | ids" for m in models) + " |"
+    lines = [head, "|---|" + "---|---|---|---|" * len(models)]
+    for case in cases:
+        cells = []
+        for model in models:
+            rows = results[model].get(case)
+            if rows is None:
+                cells.append(" | | | ")
+                continue
+            motion, blazepose = rows["motion"], rows["blazepose"]
+            cells.append(f"{motion['pa_mpjpe_mm']:.1f} ({motion['pa_mpjpe_mm'] / blazepose['pa_mpjpe_mm']:.2f}) | "
+                         f"{motion['wa_mpjpe_mm']:.0f} | {100 * motion['rotation_change_over_45deg']:.1f}% | "
+                         f"{rows['identities']}")
+        lines.append(f"| {case} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def main():
+    from jaxmocap.detect.models import LANDMARK_MODELS
+
     parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true", help="the bundled view only")
     parser.add_argument("--views", nargs="*", choices=sorted(VIEWS), default=sorted(VIEWS))
-    parser.add_argument("--variants", nargs="*", choices=VARIANTS, default=[], help="each view also so transformed")
+    parser.add_argument("--variants", nargs="*", choices=(*VARIANTS, "all"), default=[],
+                        help="each view also so transformed (all: every variant)")
+    parser.add_argument("--landmarks", nargs="+", choices=tuple(LANDMARK_MODELS), default=["heavy"],
+                        help="BlazePose landmark models, each case run with each (default: heavy, the run's)")
     parser.add_argument("--sheet", type=Path, default=None, help="contact sheet PNG of the worst frames")
     args = parser.parse_args()
     import tempfile
 
     views = {v: VIEWS[v] for v in (["cam01"] if args.quick else args.views)}
+    variants = VARIANTS if "all" in args.variants else tuple(args.variants)
     reference = load_reference()
-    results, motions, per_frame = {}, {}, {}
+    results = {model: {} for model in args.landmarks}
+    motions, per_frame, person_x = {}, {}, {}
     for view, video in views.items():
-        for kind in (None, *args.variants):
+        for kind in (None, *variants):
             name = view if kind is None else f"{view}/{kind}"
-            begin = time.perf_counter()
-            with tempfile.TemporaryDirectory() as work:
-                work = Path(work)
-                source = video
-                if kind is not None:
-                    person_x = float(np.median(motions[view]["camera_trans"][motions[view]["valid"], 0]))
-                    source = write_variant(video, kind, work / "variant.mp4", person_x)
-                stages = run_stages(source, work / "run")
-            results[name] = report_view(name, stages, variant_reference(reference, kind)) | {
-                "seconds": time.perf_counter() - begin}
-            print(f"{name}: {time.perf_counter() - begin:.0f} s", flush=True)
-            if kind is None:
-                motions[name] = stages.motion
-                per_frame[name] = results[name]["motion"]["per_frame_pa_mpjpe_mm"]
+            for model in args.landmarks:
+                begin = time.perf_counter()
+                with tempfile.TemporaryDirectory() as work:
+                    work = Path(work)
+                    source = video if kind is None else write_variant(video, kind, work / "variant.mp4",
+                                                                      person_x[view])
+                    stages = run_stages(source, work / "run", landmarks=model)
+                results[model][name] = report_view(name, stages, variant_reference(reference, kind)) | {
+                    "seconds": time.perf_counter() - begin}
+                print(f"{name} [{model}]: {time.perf_counter() - begin:.0f} s", flush=True)
+                if kind is None and model == args.landmarks[0]:
+                    motions[name] = stages.motion
+                    per_frame[name] = results[model][name]["motion"]["per_frame_pa_mpjpe_mm"]
+                    person_x[view] = float(np.median(stages.motion["camera_trans"][stages.motion["valid"], 0]))
 
     print(f"\naccuracy on real footage (Pose2Sim single-person take), {platform.machine()}")
-    print(f"{'view':>14} {'stage':>10} {'frames':>6} {'PA-MPJPE mm':>11} {'flex MAE':>9} {'accel':>7} "
-          f"{'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7} {'fingers back':>12} "
-          f"{'turns>45':>8} {'ids':>3}")
-    for name, rows in results.items():
-        for stage in ("blazepose", "ik", "fit", "motion"):
-            r = rows[stage]
-            extra = (f"{r['reprojection_median_px']:>9.1f} {100 * r['reprojection_over_40px']:>5.0f}% "
-                     f"{100 * r['valid_share']:>5.0f}%" if "valid_share" in r else f"{'':>9} {'':>6} {'':>6}")
-            coherence = (f"{r['rotation_change_median_deg']:>7.1f}° {100 * r['rotation_change_over_45deg']:>6.1f}% "
-                         f"{100 * r['fingers_backwards']:>11.1f}% {100 * r['global_turn_over_45deg']:>7.1f}%"
-                         if "rotation_change_median_deg" in r else "")
-            if stage == "motion":
-                coherence += f" {rows['identities']:>3}"
-            print(f"{name:>14} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
-                  f"{r['flexion_mae_deg']:>8.1f}° {r['accel_error_mm']:>7.1f} {extra} {coherence}")
+    print(f"{'view':>14} {'model':>6} {'stage':>10} {'frames':>6} {'PA-MPJPE mm':>11} {'WA-MPJPE':>8} {'flex MAE':>9} "
+          f"{'accel':>7} {'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7} "
+          f"{'fingers back':>12} {'turns>45':>8} {'ids':>3}")
+    for model, cases in results.items():
+        for name, rows in cases.items():
+            for stage in ("blazepose", "ik", "fit", "motion"):
+                r = rows[stage]
+                extra = (f"{r['reprojection_median_px']:>9.1f} {100 * r['reprojection_over_40px']:>5.0f}% "
+                         f"{100 * r['valid_share']:>5.0f}%" if "valid_share" in r else f"{'':>9} {'':>6} {'':>6}")
+                coherence = (f"{r['rotation_change_median_deg']:>7.1f}° "
+                             f"{100 * r['rotation_change_over_45deg']:>6.1f}% {100 * r['fingers_backwards']:>11.1f}% "
+                             f"{100 * r['global_turn_over_45deg']:>7.1f}%" if "rotation_change_median_deg" in r else "")
+                if stage == "motion":
+                    coherence += f" {rows['identities']:>3}"
+                print(f"{name:>14} {model:>6} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
+                      f"{r['wa_mpjpe_mm']:>8.0f} {r['flexion_mae_deg']:>8.1f}° {r['accel_error_mm']:>7.1f} {extra} "
+                      f"{coherence}")
+    print()
+    print("\n".join(side_by_side(results)))
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "accuracy.json").write_text(json.dumps(dict(benchmark="accuracy", machine=platform.machine(),
-                                                            views=results), indent=1))
+                                                            landmarks=results), indent=1))
     print(f"wrote {args.out / 'accuracy.json'}")
     if args.sheet:
         contact_sheet(args.sheet, views, motions, per_frame)

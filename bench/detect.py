@@ -6,10 +6,13 @@ and agreement on still images (`STILLS`: frames of the clips the tests do not co
 Ours: ``jaxmocap.detect.Detector(static_image_mode=False)`` (pose + hands, LiteRT, 2 threads). Peer: the legacy
 ``mp.solutions.holistic.Holistic`` (pose + hands, face off is impossible in legacy holistic, so also
 ``mp.solutions.pose`` + ``mp.solutions.hands`` run one after the other), in the mediapipe venv as a subprocess, same
-frames, same machine, same run. Stills: ``Detector(static_image_mode=True)`` (one person, bodies) against the
-legacy ``mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1)`` on the same images: the pixel
-distance of the 33 landmarks (median over all points, and each image's median), images where only one of the two
-finds a person. Prints tables and writes ``<out>/detect.json``.
+frames, same machine, same run. Stills: ``Detector(static_image_mode=True, landmarks=...)`` (one person, bodies)
+for each BlazePose landmark model against the legacy ``mp.solutions.pose.Pose(static_image_mode=True,
+model_complexity=c)`` on the same images (heavy: 2, full: 1, lite: 0; the wheel bundles only full, so heavy and
+lite, from jaxmocap's cache, are copied into the peer's ``mediapipe/modules/pose_landmark/``, where the legacy
+solution looks before it would download them): the pixel distance of the 33 landmarks (median over all points,
+and each image's median), images where only one of the two finds a person. Prints tables and writes
+``<out>/detect.json``.
 
 The peer needs an environment of its own, outside the clone (mediapipe 0.10.21 pins numpy<2 and cannot share
 jaxmocap's): ``python3 -m venv ~/venvs/mediapipe && ~/venvs/mediapipe/bin/pip install mediapipe==0.10.21``, then
@@ -89,14 +92,34 @@ def mediapipe_python(given: str | None) -> str | None:
 PEER_STILLS = r"""
 import json, sys, cv2, numpy as np, mediapipe as mp
 out = {}
-with mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1) as pose:
-    for path in sys.argv[1:]:
+with mp.solutions.pose.Pose(static_image_mode=True, model_complexity=int(sys.argv[1])) as pose:
+    for path in sys.argv[2:]:
         bgr = cv2.imread(path); h, w = bgr.shape[:2]
         res = pose.process(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
         out[path] = None if res.pose_landmarks is None else [
             [lm.x * w, lm.y * h] for lm in res.pose_landmarks.landmark]
 print(json.dumps({"version": mp.__version__, "results": out}))
 """
+COMPLEXITY = {"heavy": 2, "full": 1, "lite": 0}  # the legacy solution's model_complexity of each landmark model
+PEER_FOLDER = r"""
+import os, mediapipe
+print(os.path.join(os.path.dirname(mediapipe.__file__), "modules", "pose_landmark"))
+"""
+
+
+def give_peer_landmark_models(peer_python: str) -> None:
+    """Heavy and lite from jaxmocap's verified cache into the peer's package, where ``model_complexity`` 2 and 0
+    look for them (the wheel bundles full alone)."""
+    import shutil
+
+    from jaxmocap.detect.models import NPM_FILES, model_path
+
+    folder = Path(subprocess.run([peer_python, "-c", PEER_FOLDER], capture_output=True, text=True,
+                                 check=True).stdout.strip())
+    for name in NPM_FILES:
+        if not (folder / name).is_file():
+            shutil.copy(model_path(name), folder / name)
+            print(f"copied {name} into the peer's {folder}", file=sys.stderr)
 # (clip, frames): the single-person take's other view and the two-person take, none of them compared in the tests
 STILLS = (("pose2sim_single_cam03.mp4", (0, 30, 60, 90)), ("pose2sim_multi_cam01.mp4", (0, 50, 99)))
 
@@ -120,13 +143,14 @@ def write_stills(folder: Path) -> list[Path]:
     return paths
 
 
-def compare_stills(paths: list[Path], peer: dict) -> dict:
-    """Ours against the peer's landmarks on each still (as the file reads back: both decode the same JPEG)."""
+def compare_stills(paths: list[Path], peer: dict, landmarks: str) -> dict:
+    """Ours against the peer's landmarks on each still (as the file reads back: both decode the same JPEG), with
+    the landmark model ``landmarks``."""
     import cv2
 
     from jaxmocap.detect import Detector
 
-    detector = Detector(static_image_mode=True, hands=False)
+    detector = Detector(static_image_mode=True, hands=False, landmarks=landmarks)
     images, distances, missed = {}, [], []
     for path in paths:
         people = detector(cv2.imread(str(path)))
@@ -214,19 +238,22 @@ def main() -> None:
         ms = row["ms_per_frame"]
         ms_text = f"{ms:.1f}" if isinstance(ms, float) else ms
         print(f"{name:<48}{ms_text:>10}{row.get('frames_with_body', ''):>12}{row.get('hands', ''):>13}")
-    stills = None
+    stills = {}
+    if peer_python is not None:
+        give_peer_landmark_models(peer_python)
     with tempfile.TemporaryDirectory() as folder:
         paths = write_stills(Path(folder))
-        peer = run_peer(peer_python, PEER_STILLS, *paths)
-        if peer["version"] is not None:
-            stills = compare_stills(paths, peer)
-    if stills is None:
+        for landmarks, complexity in COMPLEXITY.items():
+            peer = run_peer(peer_python, PEER_STILLS, complexity, *paths)
+            if peer["version"] is not None:
+                stills[landmarks] = compare_stills(paths, peer, landmarks)
+    if not stills:
         print("stills against mediapipe: n/a (no peer)")
-    else:
-        print(f"{len(paths)} stills against mediapipe {peer['version']} (pose, static, complexity 1): median "
-              f"{stills['median_px']:.2f} px over {stills['points']} points, 90th percentile {stills['p90_px']:.2f}"
-              f" px, missed {len(stills['missed'])} {stills['missed']}")
-        for name, px in stills["images"].items():
+    for landmarks, found in stills.items():
+        print(f"{len(paths)} stills, BlazePose {landmarks} against mediapipe {peer['version']} (pose, static, "
+              f"complexity {COMPLEXITY[landmarks]}): median {found['median_px']:.2f} px over {found['points']} "
+              f"points, 90th percentile {found['p90_px']:.2f} px, missed {len(found['missed'])} {found['missed']}")
+        for name, px in found["images"].items():
             print(f"  {name:<44}{px:>8.2f} px")
     out = args.out / "detect.json"
     out.parent.mkdir(parents=True, exist_ok=True)

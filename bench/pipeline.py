@@ -1,6 +1,7 @@
 """End-to-end speed of ``jaxmocap run`` on the bundled clip, with a per-stage breakdown: the embedded default
-path, the same with ``--mode body`` (no hand model), the same on Pose2Sim's two-person take (both people tracked
-and fitted), and the FrankMocap path (regressors with random weights of the real architecture, copy-and-paste).
+path (BlazePose heavy), the same with BlazePose full (``--landmarks full``), with ``--mode body`` (no hand model),
+on Pose2Sim's two-person take (both people tracked and fitted), and the FrankMocap path (regressors with random
+weights of the real architecture, copy-and-paste).
 
     python bench/pipeline.py [--out bench/results] [--quick]      (or: jaxmocap bench --only pipeline)
 
@@ -38,7 +39,8 @@ def main():
         networks = Regressors(initialised(lambda: HandRegressor(rngs=nnx.Rngs(0))),
                               initialised(lambda: BodyRegressor(rngs=nnx.Rngs(1))))
         save(Path(weights), networks, {})
-        for path, clip, options in (("default", CLIP, {}), ("body only", CLIP, dict(mode="body")),
+        for path, clip, options in (("default (heavy)", CLIP, {}), ("landmarks full", CLIP, dict(landmarks="full")),
+                                    ("body only", CLIP, dict(mode="body")),
                                     ("two people", TWO_PEOPLE, {}),
                                     ("regressors", CLIP, dict(weights=weights, integration="copy-paste"))):
             for name in ("first run",) + (() if args.quick else ("steady",)):
@@ -52,9 +54,9 @@ def main():
     stages = list(dict.fromkeys(s for r in rows for s in r["stages"]))
     print(f"\njaxmocap run, {CLIP.name} and {TWO_PEOPLE.name} ({rows[0]['frames']} frames each), "
           f"{os.cpu_count()} CPUs, {platform.machine()}")
-    print(f"{'':<24}{'people':>7}{'frames/s':>9}{'total s':>9}" + "".join(f"{s:>18}" for s in stages))
+    print(f"{'':<28}{'people':>7}{'frames/s':>9}{'total s':>9}" + "".join(f"{s:>18}" for s in stages))
     for r in rows:
-        print(f"{r['run']:<24}{r['people']:>7}{r['fps']:>9.1f}{r['seconds']:>9.1f}" + "".join(
+        print(f"{r['run']:<28}{r['people']:>7}{r['fps']:>9.1f}{r['seconds']:>9.1f}" + "".join(
             f"{r['stages'].get(s, 0.0) * 1000 / r['frames']:>15.1f} ms" for s in stages))
     print("(stage columns: milliseconds per frame)")
     args.out.mkdir(parents=True, exist_ok=True)

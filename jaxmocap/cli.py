@@ -44,7 +44,8 @@ def _print_report(report, hands: bool = False):
     seconds = dict(report.seconds)
     total = sum(seconds.values())
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items())
-    print(f"{report.frames} frames ({report.valid} with a {'hand' if hands else 'person'}) in {total:.1f} s "
+    seen = f", BlazePose {report.landmarks}" if report.landmarks else ""
+    print(f"{report.frames} frames ({report.valid} with a {'hand' if hands else 'person'}{seen}) in {total:.1f} s "
           f"({report.frames / max(total, 1e-9):.1f} frames/s): {stages}")
     folders = {}
     for path in report.written:
@@ -62,7 +63,7 @@ def _run_config(args, source):
     return RunConfig(
         source, mode=args.mode, model=args.model, weights=args.weights, integration=args.integration,
         hand_boxes=args.hand_boxes, keypoints=args.keypoints, max_people=args.max_people, max_hands=args.max_hands,
-        start=args.start, end=args.end, stride=args.stride, chunk_size=args.chunk,
+        landmarks=args.landmarks, start=args.start, end=args.end, stride=args.stride, chunk_size=args.chunk,
         iterations=args.iterations, focal_length=args.focal_length, smooth=not args.no_smooth,
         overlay=not args.no_overlay, exports=tuple(f for f in args.export.split(",") if f),
         frankmocap_pkl=args.frankmocap_pkl, save_frames=args.save_frames, progress=not args.quiet)
@@ -99,7 +100,7 @@ def _cmd_live(args):
     except ValueError as err:
         raise InputError(f"--udp: {err}") from None
     config = LiveConfig(args.source, mode=args.mode, realtime=args.realtime, loops=args.loops,
-                        max_people=args.max_people, max_hands=args.max_hands,
+                        max_people=args.max_people, max_hands=args.max_hands, landmarks=args.landmarks,
                         serve=args.serve, host=args.host, udp=udp, record=args.record, model=args.model,
                         focal_length=args.focal_length, max_frames=args.frames, progress=not args.quiet)
 
@@ -123,13 +124,17 @@ def _cmd_detect(args):
 
         written = detect_hands_media(args.input, args.out, overlay=args.overlay, progress=not args.quiet,
                                      max_hands=args.max_hands, model_dir=args.models)
+        seen = ""
     else:
         from jaxmocap.detect import detect_media
+        from jaxmocap.detect.models import available_landmarks
 
+        landmarks = available_landmarks(args.landmarks, args.models)
         written = detect_media(args.input, args.out, overlay=args.overlay, progress=not args.quiet,
                                max_people=args.max_people, model_dir=args.models,
-                               hands=args.mode == "whole" and not args.no_hands)
-    print(f"wrote {len(written)} OpenPose JSON file(s) to {args.out}")
+                               hands=args.mode == "whole" and not args.no_hands, landmarks=landmarks)
+        seen = f" (BlazePose {landmarks})"
+    print(f"wrote {len(written)} OpenPose JSON file(s) to {args.out}{seen}")
 
 
 def _cmd_fit(args):
@@ -161,6 +166,14 @@ def _cmd_convert_frankmocap(args):
         print(f"wrote {path}")
 
 
+def _landmarks_option(p, default: str) -> None:
+    from jaxmocap.detect.models import LANDMARK_MODELS
+
+    p.add_argument("--landmarks", choices=tuple(LANDMARK_MODELS), default=default,
+                   help="BlazePose's landmark model: heavy (most accurate), full or lite (fastest); heavy and lite are "
+                        "fetched with npm on first use, full where they cannot be (default: %(default)s)")
+
+
 def _mode_options(p) -> None:
     """``--mode`` and ``--max-hands``, the same for ``run``, ``detect`` and ``live``."""
     p.add_argument("--mode", choices=("whole", "body", "hands"), default="whole",
@@ -173,6 +186,7 @@ def _mode_options(p) -> None:
 def _run_options(p) -> None:
     """Every option of ``run`` but its input and ``--out``: ``run``'s and ``batch``'s (`_run_config`)."""
     _mode_options(p)
+    _landmarks_option(p, "heavy")
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
     p.add_argument("--weights", type=Path, default=None, help="FrankMocap regressors from convert-frankmocap")
     p.add_argument("--integration", choices=("optimize", "copy-paste", "eft"), default="optimize",
@@ -235,6 +249,7 @@ def _parser() -> argparse.ArgumentParser:
     p = command("live", help="webcam, stream or file -> SMPL-X frame by frame, on a web page and over UDP")
     p.add_argument("source", help="webcam index (0), stream URL, or video file")
     _mode_options(p)
+    _landmarks_option(p, "full")
     p.add_argument("--realtime", action="store_true",
                    help="play a file at its own frame rate, as if live (frames dropped when behind)")
     p.add_argument("--loop", dest="loops", type=int, default=1, metavar="N",
@@ -258,11 +273,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("input", help="video file, image folder, single image or webcam index")
     p.add_argument("--out", type=Path, required=True, help="output folder for the JSON files")
     _mode_options(p)
+    _landmarks_option(p, "heavy")
     p.add_argument("--overlay", action="store_true", help="also draw the skeletons (images or a video)")
     p.add_argument("--max-people", type=int, default=4, help="people per frame, each with a person_id in a video "
                                                               "(default: %(default)s)")
     p.add_argument("--no-hands", action="store_true", help="body keypoints only, as --mode body")
-    p.add_argument("--models", type=Path, default=None, help="folder holding the four mediapipe .tflite files")
+    p.add_argument("--models", type=Path, default=None, help="folder holding mediapipe's .tflite files "
+                                                                    "(jaxmocap.detect.models)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_detect)
 

@@ -7,6 +7,9 @@ A motion fitted through a pinhole camera (the default pipeline) also holds ``foc
 ``principal_point (2,)`` in pixels: then ``X`` is in the camera's frame (metres; ``transl`` places the body), its
 exact pixels are ``focal_length * X[..., :2] / X[..., 2:] + principal_point``, ``reprojection_error_px`` is theirs,
 and ``camera_scale``, ``camera_trans`` are the weak-perspective projection closest to them (`lens`).
+
+A motion whose keypoints came from the detector also holds ``landmark_model ()``, the BlazePose landmark model it
+ran (``heavy``, ``full`` or ``lite``).
 """
 
 from pathlib import Path

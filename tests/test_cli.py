@@ -132,6 +132,36 @@ def test_detect_body_mode_finds_no_hands(tmp_path, capsys):
         assert not any(body["hand_left_keypoints_2d"]) and not any(body["hand_right_keypoints_2d"])
 
 
+def test_detect_says_which_landmark_model_ran_and_falls_back_to_full_without_npm(tmp_path, capsys, monkeypatch):
+    """``detect`` runs heavy by default and says so; with npm hidden from PATH and no copy of heavy, one line says
+    how to provide it and the keypoints come from full (as ``--landmarks full`` gives them); ``live`` runs full
+    by default."""
+    from jaxmocap.detect import ensure_models
+    from jaxmocap.live import LiveConfig
+
+    image = Path(__file__).parent / "data" / "messi5.jpg"
+
+    def detect(name, *options):
+        assert main(["detect", str(image), "--out", str(tmp_path / name), "--quiet", "--mode", "body", *options]) == 0
+        out, err = capsys.readouterr()
+        return out, err, json.loads((tmp_path / name / "messi5_keypoints.json").read_text())["people"]
+
+    out, err, heavy = detect("heavy")
+    assert "(BlazePose heavy)" in out and not err
+    out, _, full = detect("full", "--landmarks", "full")
+    assert "(BlazePose full)" in out and full != heavy
+    wheel_files = ensure_models()["pose_detection.tflite"].parent
+    monkeypatch.setenv("JAXMOCAP_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("JAXMOCAP_MEDIAPIPE_DIR", raising=False)
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / wheel_files.name).symlink_to(wheel_files)
+    monkeypatch.setenv("PATH", str(tmp_path / "no-npm"))
+    out, err, fallen_back = detect("fallback")
+    assert "(BlazePose full)" in out and fallen_back == full
+    assert err.count("\n") == 1 and err.startswith("notice: ") and "npm pack @mediapipe/pose@" in err, err
+    assert LiveConfig("0").landmarks == "full"
+
+
 def test_live_body_mode_builds_no_hand_model():
     """``live --mode body``: the detector without hands and the causal step without the hands' IK."""
     from jaxmocap.live import LiveConfig

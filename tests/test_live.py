@@ -243,7 +243,7 @@ def test_the_solve_runs_on_the_host_cpu():
 def test_live_agrees_with_the_offline_run(played, tmp_path):
     """The offline run's frames 20-27 (the shapes `test_pipeline` compiles) against the live ones."""
     _, motion, _ = played
-    run(RunConfig(CLIP, start=20, end=28, chunk_size=4, overlay=False, progress=False), tmp_path)
+    run(RunConfig(CLIP, start=20, end=28, chunk_size=4, overlay=False, progress=False, landmarks="full"), tmp_path)
     model = smplx_jax.load_model(smplx_jax.default_model_path())
     error, frames = live_bench.agreement_mm(model, motion, read_motion(tmp_path / "motion.npz"), first_frame=20)
     assert frames == 8 and error <= 30.0, error

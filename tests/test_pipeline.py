@@ -59,7 +59,8 @@ def result(tmp_path_factory):
 def test_motion_schema_and_conventions(result):
     out, report = result
     motion = read_motion(out / "motion.npz")
-    assert report.frames == FRAMES and set(motion) == set(MOTION_SHAPES) | set(PINHOLE_SHAPES)
+    assert report.frames == FRAMES and set(motion) == set(MOTION_SHAPES) | set(PINHOLE_SHAPES) | {"landmark_model"}
+    assert str(motion["landmark_model"]) == report.landmarks == "heavy"  # the offline default
     assert motion["valid"].all() and motion["body_pose"].shape == (FRAMES, 21, 3)
     assert tuple(motion["image_size"]) == (1080, 1920) and float(motion["fps"]) == pytest.approx(60.0)
     assert str(motion["model_sha256"]) == file_sha256(smplx_jax.default_model_path())
@@ -517,7 +518,8 @@ def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
     other.write_bytes(CLIP.read_bytes())
     variants = dict(source=other, model=None, weights=tmp_path / "weights", integration="copy-paste",
                     hand_boxes="body", keypoints=tmp_path / "keypoints", start=1, end=9, stride=2, chunk_size=64,
-                    iterations=5, focal_length=1000.0, max_people=2, mode="body", max_hands=3)
+                    iterations=5, focal_length=1000.0, max_people=2, mode="body", max_hands=3,
+                    landmarks="lite")
     keyed = {f.name for f in dataclasses.fields(RunConfig) if f.metadata != AT_THE_END}
     assert set(variants) == keyed
     for name, value in variants.items():
@@ -537,7 +539,7 @@ def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
     (dict(hand_boxes="body"), "needs --weights"), (dict(focal_length=-3.0), "focal-length must be positive"),
     (dict(exports=("fbx",)), "unknown export format"), (dict(chunk_size=0), "chunk-size must be positive"),
     (dict(max_people=0), "max-people must be positive"), (dict(max_hands=0), "max-hands must be positive"),
-    (dict(mode="feet"), "unknown mode 'feet'"),
+    (dict(mode="feet"), "unknown mode 'feet'"), (dict(landmarks="huge"), "unknown landmark model 'huge'"),
     (dict(mode="hands", keypoints=Path("k")), "hands does not take --keypoints"),
     (dict(mode="hands", weights=Path("w"), integration="eft"), "hands does not take --integration eft"),
     (dict(mode="hands", weights=Path("w"), hand_boxes="body"), "hands does not take --hand-boxes body"),

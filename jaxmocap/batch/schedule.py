@@ -14,6 +14,7 @@ from jaxmocap.batch.config import BatchConfig
 from jaxmocap.batch.ledger import STOPPED, VideoRecord, finished, mark_path, video_key, write_ledger
 from jaxmocap.batch.task import run_video
 from jaxmocap.batch.videos import folder_names, resolved
+from jaxmocap.detect.models import available_landmarks
 from jaxmocap.pipeline.config import RunConfig
 
 STOP_SECONDS = 60.0  # how long cancelled tasks get to roll back before their workers are killed
@@ -68,6 +69,9 @@ def batch(config: BatchConfig, out_dir) -> BatchReport:
     started = time.perf_counter()
     out_dir = Path(out_dir).resolve()  # as the workers find it
     out_dir.mkdir(parents=True, exist_ok=True)
+    if config.run.mode != "hands":  # the landmark model every video runs: fetched once, or full (said once)
+        config = dataclasses.replace(config, run=dataclasses.replace(
+            config.run, landmarks=available_landmarks(config.run.landmarks)))
     videos = videos_of(config, out_dir)
     records = {i: r for i, v in enumerate(videos) if (r := finished(v.mark, v.key, v.config.mode)) is not None}
     skipped = len(records)

@@ -10,7 +10,7 @@ import numpy as np
 
 from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
-from .models import ensure_models
+from .models import ensure_models, landmark_model_path
 from .pose import PoseEstimator, PoseResult, landmark_box, overlap, rect_extent, rect_iou
 from .roi import Rect, normalize_radians
 from .ssd import Detection, in_image, square_tiles
@@ -98,23 +98,27 @@ class Detector:
     frame for as long after a track is lost, or a detection the landmark model is unsure of), and each
     hand comes, as in mediapipe's holistic, from the ROI that the body's wrist, pinky and index give, refined by
     the recrop model, or from the previous frame's hand while that stays close to it. ``hands=False``: bodies
-    alone, the hand models not even loaded.
-    Model files: see ``jaxmocap.detect.models`` (``model_dir`` or ``$JAXMOCAP_MEDIAPIPE_DIR`` to use a copy).
+    alone, the hand models not even loaded. ``landmarks``: BlazePose's landmark model, ``full`` (the wheel's),
+    ``heavy`` or ``lite`` (`jaxmocap.detect.models.LANDMARK_MODELS`; same inputs and outputs).
+    Model files: see ``jaxmocap.detect.models`` (``model_dir`` or ``$JAXMOCAP_MEDIAPIPE_DIR`` to use a copy); a
+    landmark model that cannot be had is an error here (`available_landmarks` chooses one that can).
     """
 
     def __init__(self, static_image_mode: bool = True, max_people: int = 1, hands: bool = True,
                  model_dir=None, num_threads: int = 2, min_detection_confidence: float = 0.5,
-                 min_tracking_confidence: float = 0.5, redetect_every: int = 6):
+                 min_tracking_confidence: float = 0.5, redetect_every: int = 6, landmarks: str = "full"):
         if max_people < 1:
             raise ValueError(f"max_people must be >= 1, got {max_people}")
+        landmark_path = landmark_model_path(landmarks, model_dir)
         paths = ensure_models(model_dir)
+        self.landmarks = landmarks
         self.static_image_mode = static_image_mode
         self.max_people = max_people
         self.with_hands = hands
         self.min_detection_confidence = min_detection_confidence
         self.min_tracking_confidence = min_tracking_confidence
         self.redetect_every = redetect_every
-        self._pose = PoseEstimator(paths["pose_detection.tflite"], paths["pose_landmark_full.tflite"], num_threads)
+        self._pose = PoseEstimator(paths["pose_detection.tflite"], landmark_path, num_threads)
         self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
                                     paths["hand_recrop.tflite"], num_threads) if hands else None
         self._tracks: list[_Track] = []

@@ -13,6 +13,7 @@ from ..frame_source import MediaError, open_media
 from .detector import Detector, Person, as_bgr, search_interval
 from .draw import draw_openpose
 from .identities import IdentityTracker, identify
+from .models import available_landmarks
 from .openpose import body25_from_blazepose, hand21, json_name, write_openpose_json
 
 __all__ = ["detect_media", "to_openpose"]
@@ -30,18 +31,21 @@ def to_openpose(people: list[Person]) -> np.ndarray:
 
 def detect_media(input: str | os.PathLike, out_dir: str | os.PathLike, overlay: bool = False,
                  progress: bool = True, *, max_people: int = 1, model_dir: str | os.PathLike | None = None,
-                 hands: bool = True) -> list[Path]:
+                 hands: bool = True, landmarks: str = "heavy") -> list[Path]:
     """Detect people in a video file or webcam (tracking mode), an image folder or one image (static mode).
 
     Writes one OpenPose JSON per frame/image into ``out_dir`` (``<stem>_<frame:012d>_keypoints.json`` for video
     frames, ``<stem>_keypoints.json`` for images; ``"people": []`` when nobody is found) and, with ``overlay``,
-    skeleton images (``out_dir/overlay/<stem>.jpg``) or a video (``out_dir/<stem>_overlay.mp4``).
+    skeleton images (``out_dir/overlay/<stem>.jpg``) or a video (``out_dir/<stem>_overlay.mp4``). ``landmarks``:
+    BlazePose's landmark model (``full`` where it cannot be fetched, `available_landmarks`).
     Returns the JSON paths in frame order. Raises ``MediaError`` for unreadable input (and ``ModelFileError``
     when the model files cannot be had).
     """
+    landmarks = available_landmarks(landmarks, model_dir)
+
     def detect_in(media, still):
         detector = Detector(static_image_mode=still, max_people=max_people, hands=hands, model_dir=model_dir,
-                            redetect_every=search_interval(media.fps))
+                            redetect_every=search_interval(media.fps), landmarks=landmarks)
         tracker = None if still else IdentityTracker()
 
         def keypoints_of(image):

@@ -1,4 +1,5 @@
-"""BlazePose (full) as mediapipe 0.10.21's ``PoseLandmarkCpu`` graph runs it: detector, ROI, 33 landmarks.
+"""BlazePose as mediapipe 0.10.21's ``PoseLandmarkCpu`` graph runs it: detector, ROI, 33 landmarks (the full, heavy
+or lite landmark model: the same inputs and outputs).
 
 Detector (``PoseDetectionCpu``): whole image letterboxed to 224, values in [-1, 1], zero border; SSD anchors
 (5 layers, strides 8/16/32/32/32); keypoints 0 (mid hip) and 1 (scale/rotation) give the ROI (``PoseDetectionToRoi``:

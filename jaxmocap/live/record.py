@@ -18,10 +18,10 @@ class Recorder:
     """Collects each solved frame (`add`) and writes the motions (`write`)."""
 
     def __init__(self, model: smplx_jax.BodyModel, model_sha256: str, lens: Lens, fps: float,
-                 image_size: tuple[int, int]):
+                 image_size: tuple[int, int], landmarks: str):
         self.model, self.lens = model, lens
         self.meta = {"fps": np.asarray(fps), "image_size": np.asarray(image_size),
-                     "model_sha256": np.asarray(model_sha256)}
+                     "model_sha256": np.asarray(model_sha256), "landmark_model": np.asarray(landmarks)}
         self.frames: list[tuple[int, float, dict[int, Solved], dict[int, np.ndarray]]] = []
 
     def add(self, frame: int, seconds: float, solved: dict[int, Solved], keypoints: dict[int, np.ndarray]) -> None:

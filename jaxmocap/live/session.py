@@ -24,6 +24,7 @@ import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
+from jaxmocap.detect.models import LANDMARK_MODELS, available_landmarks
 from jaxmocap.errors import InputError
 from jaxmocap.io import file_sha256
 from jaxmocap.live.causal import CausalSolver, LiveSettings, Solved
@@ -47,7 +48,8 @@ class LiveConfig:
     hand model runs, hands flat) or ``hands`` (hands alone, up to ``max_hands``: `jaxmocap.live.hands`);
     ``realtime``: play a file at its frame rate, as a camera would deliver it (frames dropped when the solve falls
     behind), else as fast as it is solved, every frame; ``loops``: times a file plays (0: until stopped).
-    ``max_people``: people tracked at most. ``serve``: the web page's port (None: no page) on ``host``; ``udp``:
+    ``max_people``: people tracked at most. ``landmarks``: BlazePose's landmark model (``full`` where the one asked
+    for cannot be fetched). ``serve``: the web page's port (None: no page) on ``host``; ``udp``:
     ``(host, port)`` to send each frame's JSON line to; ``record``: a folder to write the motions to at the end (as
     ``jaxmocap run`` does). ``max_frames``: stop after that many frames solved. ``view_height``: the page's frame
     height in pixels.
@@ -59,6 +61,7 @@ class LiveConfig:
     loops: int = 1
     max_people: int = 1
     max_hands: int = 2
+    landmarks: str = "full"
     serve: int | None = None
     host: str = "127.0.0.1"
     udp: tuple[str, int] | None = None
@@ -72,7 +75,7 @@ class LiveConfig:
 
     def __post_init__(self):
         checks = (("mode", self.mode in MODES), ("loops", self.loops >= 0), ("max_people", self.max_people >= 1),
-                  ("max_hands", self.max_hands >= 1),
+                  ("max_hands", self.max_hands >= 1), ("landmarks", self.landmarks in LANDMARK_MODELS),
                   ("serve", self.serve is None or 0 <= self.serve < 65536),
                   ("max_frames", self.max_frames is None or self.max_frames >= 1),
                   ("view_height", self.view_height >= 64),
@@ -138,11 +141,12 @@ class Session:
         """The detector, the solver and the recorder of the mode."""
         config, hands = self.config, self.config.mode == "whole"
         self.solver = CausalSolver(self.model, self.lens, dataclasses.replace(config.settings, hands=hands))
+        landmarks = available_landmarks(config.landmarks)
         self.detector = Detector(static_image_mode=False, max_people=config.max_people, hands=hands,
-                                 redetect_every=search_interval(self.source.fps))
+                                 redetect_every=search_interval(self.source.fps), landmarks=landmarks)
         self.tracker = IdentityTracker()
         self.recorder = None if config.record is None else Recorder(
-            self.model, model_sha256, self.lens, self.source.fps, self.source.size)
+            self.model, model_sha256, self.lens, self.source.fps, self.source.size, landmarks)
 
     def close(self) -> None:
         """Release the source, the page and the stream (all idempotent)."""

@@ -5,6 +5,7 @@ import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from jaxmocap.detect.models import LANDMARK_MODELS
 from jaxmocap.errors import InputError
 
 MODES = ("whole", "body", "hands")
@@ -27,7 +28,9 @@ class RunConfig:
     the ``body`` regressor's projected hands (FrankMocap's fast mode). ``keypoints``: a folder of OpenPose JSON of
     one person to fit to instead of the detector's 2D keypoints (then one person is tracked). ``max_people``: people
     tracked at most (each gets an identity and a motion; the main one, seen in most frames, is ``motion.npz``).
-    ``max_hands``: hands tracked at most in ``hands`` mode.
+    ``max_hands``: hands tracked at most in ``hands`` mode. ``landmarks``: BlazePose's landmark model (heavy, full
+    or lite;
+    ``full`` where the one asked for cannot be fetched, `jaxmocap.detect.models.available_landmarks`).
     ``start``/``end``/``stride``: the frames used. ``chunk_size``: frames per resumable chunk. ``iterations``: fit
     iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``smooth``: temporal
     smoothing; ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``, ``save_frames`` (a video's frames as
@@ -45,6 +48,7 @@ class RunConfig:
     keypoints: Path | None = None
     max_people: int = 4
     max_hands: int = 2
+    landmarks: str = "heavy"
     start: int = 0
     end: int | None = None
     stride: int = 1
@@ -63,6 +67,8 @@ class RunConfig:
             raise InputError(f"unknown mode {self.mode!r} ({', '.join(MODES)})")
         if self.integration not in INTEGRATIONS:
             raise InputError(f"unknown integration {self.integration!r} ({', '.join(INTEGRATIONS)})")
+        if self.landmarks not in LANDMARK_MODELS:
+            raise InputError(f"unknown landmark model {self.landmarks!r} ({', '.join(LANDMARK_MODELS)})")
         if self.hand_boxes not in HAND_BOXES:
             raise InputError(f"unknown hand boxes {self.hand_boxes!r} ({' or '.join(HAND_BOXES)})")
         if self.mode == "hands":

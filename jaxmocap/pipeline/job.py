@@ -21,6 +21,7 @@ import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
+from jaxmocap.detect.models import available_landmarks
 from jaxmocap.frame_source import Media, open_media
 from jaxmocap.integrate import FitConfig
 from jaxmocap.io import file_sha256
@@ -55,7 +56,8 @@ SETTINGS_VERSION = 7  # of the stored chunks: bump when what a chunk holds chang
 @dataclass(frozen=True)
 class Inputs:
     """A run's inputs, opened once: the body model, the regressors (or None), the OpenPose keypoints given instead
-    of the detector's (or None), the media and its frames, and the pinhole camera fitted through (or none)."""
+    of the detector's (or None), the media and its frames, the pinhole camera fitted through (or none), and the
+    BlazePose landmark model the detector runs (`available_landmarks` of the one asked for)."""
 
     model: smplx_jax.BodyModel
     model_sha256: str
@@ -64,6 +66,7 @@ class Inputs:
     media: Media
     frames: Iterator[tuple[int, np.ndarray]]
     lens: Lens
+    landmarks: str
 
     @classmethod
     def open(cls, config: RunConfig) -> "Inputs":
@@ -74,7 +77,8 @@ class Inputs:
         given = None if config.keypoints is None else keypoints_by_frame(config.keypoints)
         media, frames = open_media(config.source, config.start, config.end, config.stride)
         lens = lens_of(media.size, config.focal_length) if regression is None else (None, None)
-        return cls(model, file_sha256(model_path), regression, given, media, frames, lens)
+        landmarks = available_landmarks(config.landmarks)
+        return cls(model, file_sha256(model_path), regression, given, media, frames, lens, landmarks)
 
 
 def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> RunReport:
@@ -88,6 +92,7 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     out_dir = Path(out_dir)
     (out_dir / "keypoints").mkdir(parents=True, exist_ok=True)
     inputs = Inputs.open(config)
+    config = dataclasses.replace(config, landmarks=inputs.landmarks)  # what the chunks are made with
     store = ChunkStore(out_dir, chunk_key(config, inputs.model_sha256) | {"version": SETTINGS_VERSION})
     chrono = Chrono()
     chunks = list(solved_chunks(config, inputs, store, out_dir, chrono, observed))
@@ -111,7 +116,7 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
                       for i, t in tracks.items()}
     with chrono("write"):
         meta = {"fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
-                "model_sha256": np.asarray(inputs.model_sha256)}
+                "model_sha256": np.asarray(inputs.model_sha256), "landmark_model": np.asarray(inputs.landmarks)}
         motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
                    for i, t in tracks.items()}
         main = main_person(motions)
@@ -122,7 +127,8 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         written += [write_motion(out_dir / "people" / str(i) / "motion.npz", m) for i, m in motions.items()]
     written += write_outputs(config, out_dir, inputs.model, inputs.media, motions, main, tracks, chunks, chrono)
     store.clear()
-    return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions))
+    return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions),
+                     inputs.landmarks)
 
 
 def shape_fit(config: RunConfig, inputs: Inputs) -> tuple[FitConfig | None, int]:
@@ -155,7 +161,7 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
     still = inputs.media.kind in ("image", "images")
     detector = Detector(static_image_mode=still, hands=config.mode == "whole" and config.hand_boxes == "keypoints",
                         max_people=1 if config.keypoints else config.max_people,
-                        redetect_every=search_interval(inputs.media.fps))
+                        redetect_every=search_interval(inputs.media.fps), landmarks=inputs.landmarks)
     tracker = None if still else IdentityTracker()
     done = 0
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:

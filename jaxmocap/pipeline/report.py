@@ -15,3 +15,4 @@ class RunReport:
     seconds: dict[str, float]
     written: list[Path]
     people: list[int]  # the identities with a motion in ``people/<id>/``
+    landmarks: str | None = None  # the BlazePose landmark model the detector ran (None: no body detector)

@@ -1,11 +1,18 @@
 """Record the official mediapipe 0.10.21 legacy solutions' landmarks on the test images (run in its own venv).
 
     python3 -m venv ~/venvs/mediapipe && ~/venvs/mediapipe/bin/pip install mediapipe==0.10.21
+    MP=$(~/venvs/mediapipe/bin/python -c 'import mediapipe, os; print(os.path.dirname(mediapipe.__file__))')
+    cp ~/.cache/jaxmocap/mediapipe-pose-0.5.1675469404/*.tflite "$MP/modules/pose_landmark/"
     ~/venvs/mediapipe/bin/python tests/data/record_mediapipe_golden.py
 
+The wheel bundles only BlazePose full (``model_complexity=1``); with heavy and lite from the npm package
+``@mediapipe/pose@0.5.1675469404`` in its ``modules/pose_landmark/`` (where jaxmocap caches them, the cp above), the
+legacy solution runs them too (``model_complexity=2`` and ``0``) instead of trying to download them.
+
 Writes ``tests/data/mediapipe_golden.json``: per image, the pose landmarks (33 × x, y in pixels, z, visibility) of
-``mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1)`` and the hands (21 × x, y in pixels, z, with
-mediapipe's handedness label and score) of ``mp.solutions.hands.Hands(static_image_mode=True)``.
+``mp.solutions.pose.Pose(static_image_mode=True, model_complexity=c)`` for each landmark model (``pose``: full,
+``pose_heavy``, ``pose_lite``) and the hands (21 × x, y in pixels, z, with mediapipe's handedness label and score)
+of ``mp.solutions.hands.Hands(static_image_mode=True)``.
 """
 
 import hashlib
@@ -16,30 +23,34 @@ import cv2
 import mediapipe as mp
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+POSES = {"pose": 1, "pose_heavy": 2, "pose_lite": 0}  # golden key -> model_complexity
 IMAGES = (["messi5.jpg"] + [f"pose2sim_cam01_f{i:03d}.jpg" for i in (0, 20, 40, 60, 80, 99)]
           + ["pose2sim_multi_f050.jpg"])
 
 
 def main() -> None:
     out = {"mediapipe_version": mp.__version__, "images": {}}
-    with mp.solutions.pose.Pose(static_image_mode=True, model_complexity=1) as pose, \
-            mp.solutions.hands.Hands(static_image_mode=True, max_num_hands=2, model_complexity=1) as hands:
+    poses = {key: mp.solutions.pose.Pose(static_image_mode=True, model_complexity=c) for key, c in POSES.items()}
+    with mp.solutions.hands.Hands(static_image_mode=True, max_num_hands=2, model_complexity=1) as hands:
         for name in IMAGES:
             bgr = cv2.imread(os.path.join(HERE, name))
             h, w = bgr.shape[:2]
             rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
             entry = {"width": w, "height": h, "pixels_sha256": hashlib.sha256(bgr.tobytes()).hexdigest(),
-                     "pose": None, "hands": []}
-            res = pose.process(rgb)
-            if res.pose_landmarks:
-                entry["pose"] = [[lm.x * w, lm.y * h, lm.z * w, lm.visibility] for lm in res.pose_landmarks.landmark]
+                     "hands": []}
+            for key, pose in poses.items():
+                res = pose.process(rgb)
+                entry[key] = None if res.pose_landmarks is None else [
+                    [lm.x * w, lm.y * h, lm.z * w, lm.visibility] for lm in res.pose_landmarks.landmark]
             res = hands.process(rgb)
             for lms, cls in zip(res.multi_hand_landmarks or [], res.multi_handedness or []):
                 entry["hands"].append({
                     "label": cls.classification[0].label, "score": cls.classification[0].score,
                     "landmarks": [[lm.x * w, lm.y * h, lm.z * w] for lm in lms.landmark]})
             out["images"][name] = entry
-            print(name, "pose" if entry["pose"] else "no pose", len(entry["hands"]), "hands")
+            print(name, *(key if entry[key] else f"no {key}" for key in POSES), len(entry["hands"]), "hands")
+    for pose in poses.values():
+        pose.close()
     with open(os.path.join(HERE, "mediapipe_golden.json"), "w") as f:
         json.dump(out, f, indent=1)
 
