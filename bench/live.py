@@ -99,7 +99,8 @@ def _receive(receiver: socket.socket, stop: threading.Event, messages: list) -> 
 
 
 def agreement(video: Path) -> dict:
-    """``video`` solved live frame by frame (every frame) against ``jaxmocap run`` on it."""
+    """``video`` solved live frame by frame (every frame) against ``jaxmocap run`` on it, both on the live
+session's landmark model (BlazePose full), so that the two solves, not two detectors, are compared."""
     import smplx_jax
     from jaxmocap.live import LiveConfig, live
     from jaxmocap.motion import read_motion
@@ -107,8 +108,9 @@ def agreement(video: Path) -> dict:
 
     model = smplx_jax.load_model(smplx_jax.default_model_path())
     with tempfile.TemporaryDirectory() as tmp:
-        live(LiveConfig(video, record=Path(tmp) / "live", progress=False))
-        run(RunConfig(video, overlay=False, progress=False), Path(tmp) / "run")
+        config = LiveConfig(video, record=Path(tmp) / "live", progress=False)
+        live(config)
+        run(RunConfig(video, overlay=False, progress=False, landmarks=config.landmarks), Path(tmp) / "run")
         ours, theirs = (read_motion(Path(tmp) / name / "motion.npz") for name in ("live", "run"))
     error, frames = agreement_mm(model, ours, theirs)
     return dict(pa_mpjpe_mm=error, frames=frames)
