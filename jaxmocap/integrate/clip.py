@@ -1,0 +1,401 @@
+"""One person's whole clip as one least-squares problem: every frame's pose and translation, one body shape.
+
+    result = fit_clip(model, keypoints, init, focal_length=f, principal_point=c, fps=60.0,
+                      keypoint_sigma_px=sigma, bones=observed_bones)
+
+Unknowns (`ClipUnknowns`): each frame's rotations of the 52 joints a fit moves (`SOLVED_JOINTS`: all but the jaw
+and the eyes, which no keypoint sees) and the body's translation in the camera frame (metres; a pinhole camera of
+known focal length and principal point), and one ``betas`` for the clip. Every residual (`residuals`) is an error
+divided by its standard deviation, stated in its own physical unit (`ClipConfig`), so that the cost is a sum of
+squared normalised errors whose balance holds for any video:
+
+* the 67 OpenPose keypoints' reprojection, in pixels over each keypoint's detector noise (``keypoint_sigma_px``),
+  by confidence, robust (Cauchy, beyond ``cauchy`` standard deviations);
+* the directions of the bones (`BONES`) against the 3D landmarks' (BlazePose's body and hands, in the camera's
+  axes), in radians over ``direction_sigma_deg``, by confidence: the depth that one image cannot give;
+* anatomy: elbows, knees and fingers within their range (`least_squares.BEND_LIMITS`, radians over
+  ``limit_sigma_deg``), fingers bending as hinges (``hinge_sigma_deg``), every joint's rotation from rest over
+  ``pose_sigma_deg`` (what no observation decides, a bone's twist, stays near rest);
+* motion: the second differences of the 67 keypoints in 3D (root included) times the frame rate squared, in m/s^2
+  over ``acceleration_sigma``; a frame's acceleration is expected within it at any frame rate;
+* the shape: ``betas`` over one standard deviation of the population (the model's shape space is whitened).
+
+Frames where the person is not ``found`` hold their start and weigh nothing. Solved by `ClipLevenbergMarquardt`
+(an `optimistix` least-squares solver, matrix-free: conjugate gradients on the damped Gauss-Newton system, each
+product one pass over the clip), preconditioned by `preconditioner`'s blocks: each frame's body with its coupling
+to the frames beside it, factored exactly (`banded`), and each finger joint. Work and memory are linear in the
+number of frames. `fit_clip` is pure and differentiable (implicit differentiation of the optimum).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from jaxmocap.integrate import banded, mat3
+from jaxmocap.integrate import keypoints as keypoint_map
+from jaxmocap.integrate.clip_solver import ClipLevenbergMarquardt, Step
+from jaxmocap.integrate.fitting import openpose_keypoint_model
+from jaxmocap.integrate.keypoints import KeypointModel, params_of
+from jaxmocap.integrate.least_squares import BEND_LIMITS, FINGER_JOINTS, bend_of
+from smplx_jax import BodyModel, SMPLXParams
+
+SOLVED_JOINTS = tuple(j for j in range(55) if j not in (22, 23, 24))  # all but the jaw and the eyes
+FIXED_JOINTS = (22, 23, 24)
+
+# Bones whose directions the 3D landmarks observe, as pairs of the 67 OpenPose keypoints (BODY_25, then each hand's
+# 21): upper arms, forearms, thighs, shins, feet (heel and ankle to big toe), the shoulder and hip lines, the
+# torso's sides, the ears' line and each ear to the nose; then each hand's 20 bones (wrist to each finger's base,
+# along each finger).
+BODY_BONES = ((5, 6), (6, 7), (2, 3), (3, 4), (12, 13), (13, 14), (9, 10), (10, 11), (14, 19), (11, 22), (21, 19),
+              (24, 22), (5, 2), (12, 9), (5, 12), (2, 9), (18, 17), (18, 0), (17, 0))
+# BlazePose landmark of each BODY_25 keypoint that `BODY_BONES` uses
+BLAZEPOSE_OF_BODY25 = {0: 0, 2: 12, 3: 14, 4: 16, 5: 11, 6: 13, 7: 15, 9: 24, 10: 26, 11: 28, 12: 23, 13: 25,
+                       14: 27, 17: 8, 18: 7, 19: 31, 21: 29, 22: 32, 24: 30}
+HAND_BONES = tuple((0 if k % 4 == 0 else k, k + 1) for k in range(20))  # OpenPose / mediapipe hand order
+BONES = BODY_BONES + tuple((25 + a, 25 + b) for a, b in HAND_BONES) + tuple((46 + a, 46 + b) for a, b in HAND_BONES)
+
+
+@dataclasses.dataclass(frozen=True)
+class ClipConfig:
+    """Each residual's standard deviation in its unit (module docstring), and the solve's step cap (static)."""
+
+    iterations: int = 200  # the cap on Levenberg-Marquardt steps
+    cg_iterations: int = 10  # conjugate-gradient steps for each step's linear system
+    cauchy: float = 3.0  # keypoint errors beyond this many standard deviations count less and less (Cauchy)
+    direction_sigma_deg: float = 15.0  # the 3D landmarks' bone directions
+    acceleration_sigma: float = 20.0  # m/s^2: a keypoint's acceleration in one frame
+    pose_sigma_deg: float = 60.0  # each joint's rotation from rest, what no observation decides
+    hinge_sigma_deg: float = 10.0  # the fingers (index to ring) off their flexion axis
+    limit_sigma_deg: float = 3.0  # beyond a joint's range
+    betas_sigma: float = 1.0  # standard deviations of the shape space
+    tolerance: float | None = None  # converged below this predicted relative decrease (None: by dtype)
+
+
+class ClipUnknowns(NamedTuple):
+    """What `fit_clip` solves for: ``T`` frames of `SOLVED_JOINTS` rotations and translations, one shape."""
+
+    pose_rotvecs: Float[Array, "T 52 3"]  # axis-angles, SMPL-X's joints of SOLVED_JOINTS
+    transl: Float[Array, "T 3"]  # the body's origin in the camera frame, metres
+    betas: Float[Array, "B"]
+
+
+class ClipData(NamedTuple):
+    """The observations and constants of one clip (`fit_clip` builds it; all arrays, so one compiled solver
+    serves any clip of the same length)."""
+
+    km: KeypointModel
+    target: Float[Array, "T 67 2"]  # pixels
+    confidence: Float[Array, "T 67"]  # 0: missing
+    sigma: Float[Array, "T 67"]  # pixels
+    directions: Float[Array, "T N 3"]  # unit, camera axes
+    direction_weight: Float[Array, "T N"]  # 0: missing
+    found: Float[Array, "T"]  # 1 where the person was found
+    start: ClipUnknowns  # what frames without the person hold
+    fixed_pose: Float[Array, "T 3 3"]  # the jaw and eyes
+    focal_length: Float[Array, ""]
+    principal_point: Float[Array, "2"]
+    fps: Float[Array, ""]
+    fit_betas: Float[Array, ""]  # 1: the shape is solved for; 0: it holds the start's
+
+
+class ClipResiduals(NamedTuple):
+    """`residuals` by structure: ``frames`` depend on their frame's unknowns (and the shape), ``motion[t]`` on
+    frames ``t - 1 .. t + 1``, ``shared`` on the shape alone (`preconditioner`'s blocks follow it)."""
+
+    frames: Float[Array, "T F"]
+    motion: Float[Array, "T M"]
+    shared: Float[Array, "B"]
+
+
+class ClipResult(NamedTuple):
+    """`fit_clip`'s result: ``params`` (T leading; ``transl`` the body's origin in the camera frame, one
+    ``betas`` in every row), whether the solve ``converged`` (met its stopping rule, not its step cap), its
+    ``steps``, and each frame's mean reprojection error (pixels, over the keypoints with confidence > 0)."""
+
+    params: SMPLXParams
+    converged: Bool[Array, ""]
+    steps: Int[Array, ""]
+    reprojection_error_px: Float[Array, "T"]
+
+
+def full_pose(pose: Float[Array, "52 3"], fixed: Float[Array, "3 3"]) -> Float[Array, "55 3"]:
+    """The 55 joints' rotations from `SOLVED_JOINTS`' and the jaw's and eyes'."""
+    return jnp.concatenate([pose[:22], fixed, pose[22:]])
+
+
+def _prior_sigma_rad(config: ClipConfig) -> np.ndarray:
+    """``(55, 3)`` the standard deviation of each joint's rotation from rest (radians; inf: no prior):
+    none for the global orientation, ``pose_sigma_deg`` for the rest, ``hinge_sigma_deg`` for the index to ring
+    fingers' twist about the bone (x in the rest pose) and sideways bending (y) but at the knuckle."""
+    sigma = np.full((55, 3), np.radians(config.pose_sigma_deg))
+    sigma[0] = np.inf
+    for first in (25, 40):
+        fingers = first + np.asarray(FINGER_JOINTS)
+        sigma[fingers, 0] = np.radians(config.hinge_sigma_deg)
+        sigma[fingers[np.asarray(FINGER_JOINTS) % 3 > 0], 1] = np.radians(config.hinge_sigma_deg)
+    return sigma
+
+
+def _log1p_ratio(u):
+    """``log1p(u) / u``, smooth at zero."""
+    small = u < 1e-3
+    us = jnp.where(small, 1.0, u)
+    return jnp.where(small, 1.0 - u / 2 + u * u / 3 - u**3 / 4, jnp.log1p(us) / us)
+
+
+def points_3d(km: KeypointModel, pose: Float[Array, "55 3"], betas, transl) -> Float[Array, "67 3"]:
+    """The 67 keypoints in the camera frame, metres."""
+    return keypoint_map.keypoints_cm(km, pose, betas).T + transl
+
+
+def _pixels(x: Float[Array, "... 3"], data: ClipData) -> Float[Array, "... 2"]:
+    return data.focal_length * x[..., :2] / jnp.maximum(x[..., 2:], 1e-3) + data.principal_point
+
+
+def _bones(x: Float[Array, "... 67 3"]) -> tuple[Float[Array, "... N 3"], Float[Array, "... N"]]:
+    """Each of `BONES`' unit direction and length."""
+    a, b = (np.asarray(side) for side in zip(*BONES))
+    bone = x[..., b, :] - x[..., a, :]
+    length = jnp.sqrt(jnp.maximum(jnp.sum(bone * bone, -1), 1e-12))
+    return bone / length[..., None], length
+
+
+def _shape(y: ClipUnknowns, data: ClipData):
+    return jnp.where(data.fit_betas > 0, y.betas, data.start.betas)
+
+
+def _points(y: ClipUnknowns, data: ClipData) -> Float[Array, "T 67 3"]:
+    betas = _shape(y, data)
+    return jax.vmap(lambda p, f, t: points_3d(data.km, full_pose(p, f), betas, t))(y.pose_rotvecs, data.fixed_pose,
+                                                                                  y.transl)
+
+
+def _motion_rows(found: Float[Array, "T"]) -> Float[Array, "T"]:
+    """1 where a frame and both its neighbours have the person (its acceleration is a residual)."""
+    if found.shape[0] < 3:
+        return jnp.zeros_like(found)
+    zero = jnp.zeros(1, found.dtype)
+    return jnp.concatenate([zero, found[:-2] * found[1:-1] * found[2:], zero])
+
+
+def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipResiduals:
+    """Every residual of the clip (module docstring); half their sum of squares is the cost `fit_clip`
+    minimises."""
+    x = _points(y, data)
+    error = (_pixels(x, data) - data.target) / data.sigma[..., None]
+    u = jnp.sum(error * error, -1) / config.cauchy**2
+    weight = jnp.sqrt(data.confidence * data.found[:, None])
+    reprojection = weight[..., None] * error * jnp.sqrt(_log1p_ratio(u))[..., None]
+    direction = (jnp.sqrt(data.direction_weight * data.found[:, None])[..., None]
+                 * (_bones(x)[0] - data.directions) / np.radians(config.direction_sigma_deg))
+    pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
+    limits = jax.nn.relu(jax.vmap(bend_of)(pose)) / np.radians(config.limit_sigma_deg)
+    prior = y.pose_rotvecs / _prior_sigma_rad(config)[list(SOLVED_JOINTS)]
+    lost = 1.0 - data.found
+    hold = jnp.concatenate([lost[:, None, None] * (y.pose_rotvecs - data.start.pose_rotvecs),
+                            lost[:, None, None] * (y.transl - data.start.transl)[:, None]], 1)
+    t = x.shape[0]
+    acceleration = (jnp.concatenate([jnp.zeros_like(x[:1]), x[:-2] - 2 * x[1:-1] + x[2:], jnp.zeros_like(x[:1])])
+                    if t > 2 else jnp.zeros_like(x)) * data.fps**2
+    motion = _motion_rows(data.found)[:, None, None] * acceleration / config.acceleration_sigma
+    shared = jnp.where(data.fit_betas > 0, y.betas / config.betas_sigma, y.betas - data.start.betas)
+    frames = jnp.concatenate([reprojection.reshape(t, -1), direction.reshape(t, -1), limits, prior.reshape(t, -1),
+                              hold.reshape(t, -1)], 1)
+    return ClipResiduals(frames, motion.reshape(t, -1), shared)
+
+
+BODY = 22  # the body's joints (global orientation to wrists), the first of SOLVED_JOINTS
+
+
+class ClipBlocks(NamedTuple):
+    """`preconditioner`'s blocks of ``J^T J``: the bodies' (each frame's 22 joints' increments, then its
+    translation) with their coupling over time (block-banded), each finger joint's 3x3, the shape's diagonal
+    (`clip_solver.Preconditioner`)."""
+
+    body: banded.Banded  # m = 69
+    fingers: Float[Array, "T 30 3 3"]
+    betas: Float[Array, "B"]
+
+    def diagonal(self) -> Step:
+        body = jnp.diagonal(self.body.diagonal, axis1=-2, axis2=-1)
+        pose = jnp.concatenate([body[:, :3 * BODY].reshape(-1, BODY, 3),
+                                jnp.diagonal(self.fingers, axis1=-2, axis2=-1)], 1)
+        return Step(pose, body[:, 3 * BODY:], self.betas)
+
+    def damped_inverse(self, shift: Step) -> Callable[[Step], Step]:
+        def body_of(step):
+            return jnp.concatenate([step.pose[:, :BODY].reshape(step.pose.shape[0], -1), step.transl], 1)
+
+        body = banded.factor(self.body._replace(diagonal=self.body.diagonal + jax.vmap(jnp.diag)(body_of(shift))))
+        eye = jnp.eye(3, dtype=self.fingers.dtype)
+        fingers = _inverse3(self.fingers + shift.pose[:, BODY:, :, None] * eye)
+        betas = 1.0 / (self.betas + shift.betas)
+
+        def apply(v: Step) -> Step:
+            solved = banded.solve(body, body_of(v))
+            pose = jnp.concatenate([solved[:, :3 * BODY].reshape(-1, BODY, 3),
+                                    jnp.einsum("tjab,tjb->tja", fingers, v.pose[:, BODY:])], 1)
+            return Step(pose, solved[:, 3 * BODY:], betas * v.betas)
+
+        return apply
+
+
+def _inverse3(m: Float[Array, "... 3 3"]) -> Float[Array, "... 3 3"]:
+    """The inverses of 3x3 matrices (`mat3.inverse`: cofactors, no LAPACK)."""
+    columns = jnp.moveaxis(m.reshape(-1, 3, 3), 0, -1)
+    return jnp.moveaxis(mat3.inverse(columns), -1, 0).reshape(m.shape)
+
+
+def _frame_blocks(km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost):
+    """One frame's `ClipBlocks` rows: ``image`` and ``motion`` (K, 3, 3) each keypoint's metric of its 3D
+    position's change (reprojection through the pinhole, acceleration's diagonal), ``bone_metric`` (N, 3, 3) each
+    bone's of its far end's change relative to its near end (``bones``: the pairs), ``axis_weight`` (55, 3) the
+    priors' weights on the axis-angles and ``to_theta`` (55, 3, 3) their change per local increment."""
+    jacobian = keypoint_map.pose_jacobian(km, lin)  # (3, K, 55, 3), in the local increments
+    k = jacobian.shape[1]
+    body = jnp.concatenate([jnp.moveaxis(jacobian[:, :, :BODY], 0, 1).reshape(k, 3, 3 * BODY),
+                            jnp.broadcast_to(jnp.eye(3, dtype=jacobian.dtype), (k, 3, 3))], -1)  # (K, 3, 69)
+    metric = image + motion
+    a, b = bones
+    across = body[b] - body[a]  # (N, 3, 69)
+    dense = (jnp.einsum("kci,kcd,kdj->ij", body, metric, body)
+             + jnp.einsum("nci,ncd,ndj->ij", across, bone_metric, across))
+    theta = jnp.swapaxes(to_theta, -1, -2) @ (axis_weight[..., None] * to_theta)  # (55, 3, 3)
+    prior = jax.scipy.linalg.block_diag(*theta[:BODY], lost * jnp.eye(3, dtype=dense.dtype))
+    finger = jnp.moveaxis(jacobian[:, :, 25:], 0, 1)  # (K, 3, 30, 3)
+    far = jnp.zeros_like(metric).at[b].add(bone_metric)
+    fingers = jnp.einsum("kcja,kcd,kdjb->jab", finger, metric + far, finger) + theta[25:]
+    return dense + prior, fingers, body
+
+
+def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipBlocks:
+    """Blocks of ``J^T J`` at ``y`` (`ClipBlocks`): of each frame's body, from the keypoints' reprojection
+    (through the pinhole's Jacobian, at Cauchy's weight), their acceleration (its diagonal coefficients), the bones'
+    directions and the priors, limits and holds; of each finger joint likewise (a bone's direction on its far
+    end); the shape's diagonal. Blended skinning is left out (millimetres); any positive definite blocks make the
+    solve converge, these make it fast."""
+    betas = _shape(y, data)
+    km = data.km
+    pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
+    lin = jax.vmap(lambda p: keypoint_map.in_tangent(keypoint_map.linearize(km, p, betas)))(pose)
+    x = jnp.swapaxes(lin.x, 1, 2) + y.transl[:, None]  # (T, 67, 3) camera frame
+    z = jnp.maximum(x[..., 2], 1e-3)
+    error = (_pixels(x, data) - data.target) / data.sigma[..., None]
+    irls = data.confidence * data.found[:, None] / (1.0 + jnp.sum(error * error, -1) / config.cauchy**2)
+    zero, one = jnp.zeros_like(z), jnp.ones_like(z)
+    projection = (data.focal_length / z)[..., None, None] * jnp.stack(
+        [jnp.stack([one, zero, -x[..., 0] / z], -1), jnp.stack([zero, one, -x[..., 1] / z], -1)], -2)  # (T,K,2,3)
+    image = (irls / data.sigma**2)[..., None, None] * jnp.swapaxes(projection, -1, -2) @ projection
+    rows = _motion_rows(data.found)
+    coefficient = jnp.concatenate([rows[1:], jnp.zeros(1, rows.dtype)]) + 4 * rows + jnp.concatenate(
+        [jnp.zeros(1, rows.dtype), rows[:-1]])
+    eye = jnp.eye(3, dtype=x.dtype)
+    motion = (coefficient * (data.fps**2 / config.acceleration_sigma) ** 2)[:, None, None, None] * jnp.broadcast_to(
+        eye, image.shape)
+    unit, length = _bones(x)
+    weight = data.direction_weight * data.found[:, None] / (np.radians(config.direction_sigma_deg) * length) ** 2
+    bone_metric = weight[..., None, None] * (eye - unit[..., :, None] * unit[..., None, :])
+    # the priors, limits and holds act on the axis-angle, which moves by J_l(theta)^-1 per local increment
+    to_theta = _inverse3(mat3.left_jacobian(pose))  # (T, 55, 3, 3)
+    bend_joints, bend_axes = ([limit[i] for limit in BEND_LIMITS] for i in (0, 1))
+    bend = jnp.zeros((pose.shape[0], 55, 3), pose.dtype).at[:, bend_joints, bend_axes].add(
+        (jax.vmap(bend_of)(pose) > 0) / np.radians(config.limit_sigma_deg) ** 2)
+    lost = 1.0 - data.found
+    axis_weight = bend + jnp.asarray(_prior_sigma_rad(config) ** -2, pose.dtype) + lost[:, None, None]
+    bones = tuple(np.asarray(side) for side in zip(*BONES))
+    diagonal, fingers, jacobian = jax.vmap(_frame_blocks, in_axes=(None, 0, 0, 0, None, 0, 0, 0, 0))(
+        km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost)
+    # the accelerations couple each frame's body with the two before and after it (`residuals`' rows, by frame)
+    coupling = (data.fps**2 / config.acceleration_sigma) ** 2
+
+    def across(by):  # sum_k J[t + by]^T J[t] of each frame t, zero past the end
+        frames, m = jacobian.shape[0], jacobian.shape[-1]
+        zero = jnp.zeros((min(by, frames), m, m), jacobian.dtype)
+        if frames <= by:
+            return zero
+        return jnp.concatenate([jnp.einsum("tkci,tkcj->tij", jacobian[by:], jacobian[:-by]), zero])
+
+    after = jnp.concatenate([rows[1:], jnp.zeros(1, rows.dtype)])  # the next frame's row
+    body = banded.Banded(diagonal, coupling * (-2 * rows - 2 * after)[:, None, None] * across(1),
+                         coupling * after[:, None, None] * across(2))
+    far = jnp.zeros_like(image).at[:, bones[1]].add(bone_metric)
+    jb = lin.jb.reshape(pose.shape[0], betas.shape[0], 3, -1)  # (T, B, 3, K)
+    shape = jnp.einsum("tbck,tkcd,tbdk->b", jb, image + motion + far, jb) + config.betas_sigma**-2
+    return ClipBlocks(body, fingers, jnp.where(data.fit_betas > 0, shape, 1.0))
+
+
+def _tolerance(config: ClipConfig, dtype) -> float:
+    return config.tolerance or (1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5)
+
+
+def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPLXParams, *,
+             focal_length: float | Float[ArrayLike, ""], principal_point: Float[ArrayLike, "2"], fps: float,
+             keypoint_sigma_px: Float[ArrayLike, "T 67"], directions: Float[ArrayLike, "T N 3"] | None = None,
+             direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
+             fit_betas: bool = True, config: ClipConfig | None = None,
+             adjoint: optx.AbstractAdjoint | None = None) -> ClipResult:
+    """Fit one person's clip (module docstring). ``keypoints (T, 67, 3)``: OpenPose BODY_25 and both hands, x, y
+    in pixels and a confidence (0, NaN or inf: missing); ``init``: each frame's start (T leading; ``transl`` in the
+    camera frame, the start's ``betas`` averaged over the frames found); ``focal_length`` and ``principal_point``
+    in pixels; ``fps`` the clip's frame rate; ``keypoint_sigma_px`` each keypoint's detector noise, pixels;
+    ``directions`` and ``direction_weight``: the observed unit direction of each of `BONES` in the camera's axes
+    and its confidence (None: no 3D observation); ``found``: where the person is (default: where any keypoint
+    is); ``fit_betas`` False holds the shape at the start's.
+
+    Pure: works under `jax.jit` (one program per clip length) and `jax.grad`; gradients with respect to the
+    observations come from implicit differentiation of the optimum (``adjoint`` None, `optimistix.ImplicitAdjoint`:
+    it materialises the Jacobian of the optimality condition, fine for short clips;
+    ``optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps instead)."""
+    config = config or ClipConfig()
+    dtype = init.global_orient.dtype
+    t = keypoints.shape[0]
+    km = openpose_keypoint_model(model)
+    keypoints = jnp.asarray(keypoints)
+    finite = jnp.all(jnp.isfinite(keypoints), -1)
+    confidence = jnp.where(finite & (keypoints[..., 2] > 0), keypoints[..., 2], 0.0).astype(dtype)
+    target = jnp.where(finite[..., None], keypoints[..., :2], 0.0).astype(dtype)
+    found = (jnp.sum(confidence > 0, -1) > 0) if found is None else jnp.asarray(found)
+    if directions is None:
+        directions = jnp.zeros((t, len(BONES), 3), dtype)
+        direction_weight = jnp.zeros((t, len(BONES)), dtype)
+    pose = jax.vmap(SMPLXParams.full_pose)(init)
+    found_f = found.astype(dtype)
+    betas0 = jnp.sum(found_f[:, None] * init.betas, 0) / jnp.maximum(jnp.sum(found_f), 1.0)
+    start = ClipUnknowns(pose[:, list(SOLVED_JOINTS)], init.transl.astype(dtype), betas0)
+    data = ClipData(km, target, confidence, jnp.asarray(keypoint_sigma_px, dtype), jnp.asarray(directions, dtype),
+                    jnp.asarray(direction_weight, dtype), found_f, start, pose[:, list(FIXED_JOINTS)],
+                    jnp.asarray(focal_length, dtype), jnp.asarray(principal_point, dtype), jnp.asarray(fps, dtype),
+                    jnp.asarray(1.0 if fit_betas else 0.0, dtype))
+    solver = ClipLevenbergMarquardt(rtol=_tolerance(config, dtype), fit_shared=fit_betas,
+                                    cg_iterations=config.cg_iterations)
+    blocks = jax.tree_util.Partial(preconditioner, config=config)
+    solution = optx.least_squares(jax.tree_util.Partial(residuals, config=config), solver, start, data,
+                                  options=dict(preconditioner=blocks), max_steps=config.iterations, throw=False,
+                                  adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
+    y = solution.value
+    betas = jnp.where(fit_betas, y.betas, betas0)
+    params = jax.vmap(params_of, in_axes=(0, None, None))(
+        jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose), betas, model.num_expression)
+    params = params.replace(transl=y.transl)
+    return ClipResult(params, solution.result == optx.RESULTS.successful, solution.stats["num_steps"],
+                      reprojection_errors(y._replace(betas=betas), data))
+
+
+def reprojection_errors(y: ClipUnknowns, data: ClipData) -> Float[Array, "T"]:
+    """Each frame's mean pixel distance between the keypoints projected and their targets (confidence > 0)."""
+    def one(pose, fixed, transl, target, confidence):
+        x = points_3d(data.km, full_pose(pose, fixed), y.betas, transl)
+        pixels = data.focal_length * x[:, :2] / jnp.maximum(x[:, 2:], 1e-3) + data.principal_point
+        seen = confidence > 0
+        error = jnp.linalg.norm(pixels - target, axis=-1)
+        return jnp.sum(jnp.where(seen, error, 0.0)) / jnp.maximum(jnp.sum(seen), 1)
+
+    return jax.vmap(one)(y.pose_rotvecs, data.fixed_pose, y.transl, data.target, data.confidence)
