@@ -1,6 +1,6 @@
 """Accuracy on real footage (docs/BENCHMARKS.md, "Accuracy on real footage"): monocular runs on views of Pose2Sim's
 single-person take, scored against the multi-view 3D reference beside BlazePose's own monocular 3D (the world
-landmarks the fit starts from), stage by stage: BlazePose, the IK start, the fit, the smoothed motion (what
+landmarks the fit starts from), stage by stage: BlazePose, the clip fit's start (IK), the motion (what
 ``jaxmocap run`` writes).
 
     python bench/accuracy.py [--views cam01 cam03] [--variants all | mirror rotate90 roll15 roll30 crop half 30fps pan]
@@ -116,12 +116,16 @@ def whole_clip_error_mm(joints: np.ndarray, reference: np.ndarray, present: np.n
 
 def rotation_changes_deg(global_orient: np.ndarray, body_pose: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Angle between consecutive frames' rotations of the global orientation and the 21 body joints, degrees,
-    over consecutive valid frames: ``(pairs, 22)``."""
-    from jaxmocap.pipeline.coherent import body_rotmats, turns_deg
+    over consecutive valid frames: ``(pairs, 22)`` (of ``R = a^T b``, ``atan2(|R - R^T| / 2, (trace R - 1) / 2)``)."""
+    from smplx_jax.rotations import rotvec_to_rotmat
 
-    rot = body_rotmats(global_orient, body_pose)
+    rotvecs = np.concatenate([np.asarray(global_orient)[:, None], np.asarray(body_pose)], 1)
+    rot = np.asarray(rotvec_to_rotmat(rotvecs.astype(np.float32)), np.float64)
     pairs = np.flatnonzero(valid[:-1] & valid[1:])
-    return turns_deg(rot[pairs], rot[pairs + 1])
+    r = np.swapaxes(rot[pairs], -1, -2) @ rot[pairs + 1]
+    sin = 0.5 * np.linalg.norm(np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
+                                         r[..., 1, 0] - r[..., 0, 1]], -1), axis=-1)
+    return np.degrees(np.arctan2(sin, 0.5 * (np.trace(r, axis1=-2, axis2=-1) - 1.0)))
 
 
 def rotation_coherence(motion: dict) -> dict:
@@ -200,46 +204,43 @@ def fingers_bent_backwards(motion: dict, tolerance_deg: float = 10.0) -> float:
 
 @dataclass
 class Stages:
-    """One view's per-frame results: BlazePose's limb landmarks, the IK start, the fit, the smoothed motion."""
+    """One view's per-frame results: BlazePose's limb landmarks, the clip fit's start (IK from the landmarks,
+    placed in the camera), the motion."""
 
     blazepose: np.ndarray  # (T, 12, 3) world landmarks, NaN where no person
-    ik: dict  # motion-like arrays of each stage (global_orient, body_pose, ..., valid)
-    fit: dict
+    ik: dict  # motion-like arrays of the start (global_orient, body_pose, ..., valid)
     motion: dict  # as `jaxmocap run` writes it
     identities: int  # the people the run found (one in this take)
 
 
 def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str = "heavy") -> Stages:
-    """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before the shape and
-    smoothing from what the run itself observed and fitted, chunk by chunk (`run`'s ``observed``): BlazePose's
-    world landmarks (left and right put back where the detector exchanged them, as the fit takes them), the IK
-    start from the same observations, the fit. The take has one person: each frame's is the lowest id found."""
+    """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before the clip fit from
+    what the run itself observed, chunk by chunk (`run`'s ``observed``): BlazePose's world landmarks (left and
+    right put back where the detector exchanged them, as the fit takes them) and the fit's start. The take has one
+    person: each frame's is the lowest id found."""
     import jax
 
     import smplx_jax
     from jaxmocap.motion import lens, read_motion
-    from jaxmocap.pipeline import Bodies, RunConfig, initial_bodies, motion_arrays, run
+    from jaxmocap.pipeline import Bodies, RunConfig, motion_arrays, run
     from jaxmocap.pipeline.records import frames_where
 
     model = smplx_jax.load_model(smplx_jax.default_model_path())
-    chunks = []  # per chunk: (BlazePose's limbs, IK bodies, fitted bodies, 2D keypoints)
+    chunks = []  # per chunk: (BlazePose's limbs, the clip fit's start, 2D keypoints)
 
     def observed(chunk, people):
         count = len(chunk.frame_index)
-        part = (np.full((count, 12, 3), np.nan), Bodies.absent(count, model), Bodies.absent(count, model),
-                np.zeros((count, 67, 3)))
+        part = (np.full((count, 12, 3), np.nan), Bodies.absent(count, model), np.zeros((count, 67, 3)))
         for person_id in sorted(people, reverse=True):
             obs, track = people[person_id], chunk.people[person_id]
-            ik = Bodies(initial_bodies(model, obs), np.ones(count), np.zeros((count, 2)), obs.found)
-            mine = (obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], ik, track.bodies, track.keypoints_2d)
+            mine = (obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], track.bodies, track.keypoints_2d)
             part = frames_where(obs.found, mine, part)
         chunks.append(part)
 
     run(RunConfig(video, end=end, overlay=False, progress=False, landmarks=landmarks), work, observed=observed)
     motion = read_motion(work / "motion.npz")
-    blazepose, ik, fitted, keypoints = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
-    return Stages(blazepose, motion_arrays(model, ik, keypoints),
-                  motion_arrays(model, fitted, keypoints, lens(motion)), motion,
+    blazepose, start, keypoints = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
+    return Stages(blazepose, motion_arrays(model, start, keypoints, lens(motion)), motion,
                   len(list((work / "people").iterdir())))
 
 
@@ -259,7 +260,7 @@ def limb_joints(motion: dict) -> np.ndarray:
 def report_view(name: str, stages: Stages, reference: np.ndarray) -> dict:
     rows = {"identities": stages.identities}
     for stage, joints in (("blazepose", stages.blazepose), ("ik", limb_joints(stages.ik)),
-                          ("fit", limb_joints(stages.fit)), ("motion", limb_joints(stages.motion))):
+                          ("motion", limb_joints(stages.motion))):
         result, per_frame = score(joints, reference)
         rows[stage] = asdict(result) | {"per_frame_pa_mpjpe_mm": [None if np.isnan(v) else round(float(v), 1)
                                                                     for v in per_frame]}
@@ -383,7 +384,7 @@ def main():
           f"{'fingers back':>12} {'turns>45':>8} {'ids':>3}")
     for model, cases in results.items():
         for name, rows in cases.items():
-            for stage in ("blazepose", "ik", "fit", "motion"):
+            for stage in ("blazepose", "ik", "motion"):
                 r = rows[stage]
                 extra = (f"{r['reprojection_median_px']:>9.1f} {100 * r['reprojection_over_40px']:>5.0f}% "
                          f"{100 * r['valid_share']:>5.0f}%" if "valid_share" in r else f"{'':>9} {'':>6} {'':>6}")

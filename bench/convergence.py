@@ -39,7 +39,7 @@ def observed_sets(model) -> dict[str, dict]:
     from jaxmocap.motion import lens, read_motion
     from jaxmocap.pipeline.config import RunConfig
     from jaxmocap.pipeline.job import run_bodies
-    from jaxmocap.pipeline.stages import initial_bodies
+    from jaxmocap.pipeline.stages import initial_poses
 
     sets = {}
     for name, clip in CLIPS.items():
@@ -47,7 +47,7 @@ def observed_sets(model) -> dict[str, dict]:
 
         def observed(chunk, people, parts=parts):
             for pid, obs in people.items():
-                start = initial_bodies(model, obs)
+                start = initial_poses(model, obs)
                 parts.setdefault(pid, []).append((obs.keypoints, np.asarray(full_pose_of(start)),
                                                   np.asarray(start.betas), obs.found))
 

@@ -1,5 +1,5 @@
 """Optimization integration speed: frames/s of the fit (`jaxmocap.integrate.fit`, optimistix) over 256 and 1024
-frames and its final reprojection error, in two settings: the pipeline's (`jaxmocap.pipeline.stages.FIT_FROM_IK`,
+frames and its final reprojection error, in two settings: live capture's (`jaxmocap.pipeline.stages.FIT_FROM_IK`,
 CG steps, 20 iterations) and the defaults (dense steps, at most `fitting.ITERATIONS`, stopping once converged: the
 share converged is reported), against a PyTorch baseline on the same objective, data, start and
 threads: the ``smplx`` package + ``torch.optim.LBFGS`` (strong Wolfe line search, 20 iterations) and Adam (20 steps).

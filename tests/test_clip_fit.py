@@ -12,6 +12,7 @@ import smplx_jax
 from jaxmocap.integrate import clip
 from jaxmocap.integrate.fitting import default_pose, openpose_keypoint_model
 from jaxmocap.integrate.keypoints import params_of
+from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
 FOCAL, CENTRE, FPS = 1500.0, np.array([960.0, 540.0]), 30.0
 MODEL = smplx_jax.load_model(smplx_jax.default_model_path())
@@ -98,6 +99,35 @@ def test_the_clip_has_one_shape():
     assert np.median(error_mm) < 15.0, np.median(error_mm)
 
 
+def _turned(rotvecs, rotations):
+    """Axis-angles ``(..., 3)`` turned by the rotations ``(..., 3, 3)`` (on the right)."""
+    return np.asarray(rotmat_to_rotvec(jnp.asarray(
+        np.asarray(rotvec_to_rotmat(jnp.asarray(rotvecs, jnp.float32)), np.float64) @ rotations, jnp.float32)))
+
+
+def _degrees_between(a, b):
+    relative = np.swapaxes(np.asarray(rotvec_to_rotmat(jnp.asarray(a, jnp.float32))), -1, -2) @ np.asarray(
+        rotvec_to_rotmat(jnp.asarray(b, jnp.float32)))
+    return np.degrees(np.arccos(np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1) / 2, -1.0, 1.0)))
+
+
+def test_a_twist_handed_between_the_elbow_and_the_wrist_in_one_frame_is_taken_back():
+    """One frame's start with 60 degrees of twist moved from the left wrist to the elbow, about the forearm (the
+    same keypoints, within 0.05 mm: the image and the 3D landmarks are blind to it; the rest prior too, nearly):
+    the joints' angular accelerations take it back to within 20 degrees (60 without them)."""
+    pose, betas, transl, keypoints, directions = synthetic_clip(12)
+    rest = np.asarray(MODEL.joint_template, np.float64)
+    axis = (rest[20] - rest[18]) / np.linalg.norm(rest[20] - rest[18])
+    turn = np.asarray(rotvec_to_rotmat(jnp.asarray(np.radians(60.0) * axis, jnp.float32)), np.float64)
+    start = pose.copy()
+    start[6, 18] = _turned(pose[6, 18], turn)
+    start[6, 20] = _turned(np.zeros(3), turn.T @ np.asarray(rotvec_to_rotmat(jnp.asarray(pose[6, 20], jnp.float32))))
+    result = fitted(keypoints, params_of_clip(start, betas, transl), directions, fit_betas=False)
+    fitted_pose = np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(result.params))
+    off = _degrees_between(fitted_pose[6, [18, 20]], pose[6, [18, 20]])
+    assert np.all(off < 20.0), off
+
+
 def params_of_clip(pose, betas, transl):
     return jax.vmap(params_of, in_axes=(0, None, None))(
         jnp.asarray(pose, jnp.float32), jnp.asarray(betas, jnp.float32), MODEL.num_expression).replace(
@@ -137,7 +167,7 @@ def test_gradients_through_the_clip_fit_match_finite_differences(x64, default_mo
         result = clip.fit_clip(model, kp, start, focal_length=FOCAL, principal_point=CENTRE, fps=FPS,
                                keypoint_sigma_px=jnp.full((3, 67), 2.0), directions=d,
                                direction_weight=jnp.ones(d.shape[:2]),
-                               config=clip.ClipConfig(iterations=500, cg_iterations=200, tolerance=1e-14))
+                               config=clip.ClipConfig(iterations=500, cg_iterations=200, tolerance_per_frame=1e-14))
         p = jax.tree.map(lambda a: a[1], result.params)
         return clip.points_3d(km, p.full_pose(), p.betas, p.transl)[4] @ along, result.converged
 

@@ -39,9 +39,9 @@ def test_the_fit_sits_on_the_person(scored):
 
 
 def test_rotations_are_coherent_over_time(scored):
-    """No twist flips between frames 1/60 s apart in the motion; before it, frames fitted alone (the IK start and
-    the fit, from BlazePose heavy's frames: 1.5% and 1.4% of joint-frames measured) turn a few joints."""
-    for stage, flips in (("ik", 0.02), ("fit", 0.02), ("motion", 0.01)):
+    """No twist flips between frames 1/60 s apart in the motion (the clip fit); before it, the frames' IK start
+    (each frame from its own BlazePose heavy landmarks) turns a few joints."""
+    for stage, flips in (("ik", 0.02), ("motion", 0.003)):
         assert scored[stage]["rotation_change_median_deg"] <= 5.0, (stage, scored[stage])
         assert scored[stage]["rotation_change_over_45deg"] <= flips, (stage, scored[stage])
 
@@ -55,10 +55,11 @@ def test_3d_against_the_blazepose_landmarks_it_starts_from(scored):
 
 
 def test_live_stays_with_the_offline_run_over_the_whole_clip(scored, run_dir, tmp_path):
-    """The clip solved live, frame by frame, against the offline run, both on BlazePose heavy: measured 28.0 mm
-    PA-MPJPE over the body joints (16.1 mm when both ran BlazePose full; 30.9 mm on full when the live IK's priors
-    followed its warm start: the ankles' twists, which no landmark sees, drifted by ~130 degrees over the clip)."""
+    """The clip solved live, frame by frame, against the offline run (one fit of the whole clip), both on BlazePose
+    heavy: measured 38.7 mm PA-MPJPE over the body joints (28.0 mm when the offline run too fitted frames alone; the
+    whole clip's fit holds the 3D landmarks' bone directions and the motion's accelerations, which the live path's
+    fit of each frame does not yet)."""
     live(LiveConfig(accuracy.VIEWS["cam03"], record=tmp_path, progress=False, landmarks="heavy"))  # the run's
     model = smplx_jax.load_model(smplx_jax.default_model_path())
     error, frames = agreement_mm(model, read_motion(tmp_path / "motion.npz"), read_motion(run_dir / "motion.npz"))
-    assert frames >= 95 and error <= 32.0, (error, frames)
+    assert frames >= 95 and error <= 42.0, (error, frames)

@@ -12,7 +12,8 @@ squared normalised errors whose balance holds for any video:
 * the 67 OpenPose keypoints' reprojection, in pixels over each keypoint's detector noise (``keypoint_sigma_px``),
   by confidence, robust (Cauchy, beyond ``cauchy`` standard deviations);
 * the directions of the bones (`BONES`) against the 3D landmarks' (BlazePose's body and hands, in the camera's
-  axes), in radians over ``direction_sigma_deg``, by confidence: the depth that one image cannot give;
+  axes), in radians over ``direction_sigma_deg``, by confidence, robust alike (a landmark model's gross errors, a
+  hand seen palm for back, count less and less): the depth that one image cannot give;
 * anatomy: elbows, knees and fingers within their range (`least_squares.BEND_LIMITS`, radians over
   ``limit_sigma_deg``), fingers bending as hinges (``hinge_sigma_deg``), every joint's rotation from rest over
   ``pose_sigma_deg`` (what no observation decides, a bone's twist, stays near rest);
@@ -46,6 +47,7 @@ from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.integrate.keypoints import KeypointModel, params_of
 from jaxmocap.integrate.least_squares import BEND_LIMITS, FINGER_JOINTS, bend_of
 from smplx_jax import BodyModel, SMPLXParams
+from smplx_jax.rotations import quat_to_rotvec, rotvec_to_quat
 
 SOLVED_JOINTS = tuple(j for j in range(55) if j not in (22, 23, 24))  # all but the jaw and the eyes
 FIXED_JOINTS = (22, 23, 24)
@@ -67,16 +69,22 @@ BONES = BODY_BONES + tuple((25 + a, 25 + b) for a, b in HAND_BONES) + tuple((46 
 class ClipConfig:
     """Each residual's standard deviation in its unit (module docstring), and the solve's step cap (static)."""
 
-    iterations: int = 200  # the cap on Levenberg-Marquardt steps
-    cg_iterations: int = 10  # conjugate-gradient steps for each step's linear system
-    cauchy: float = 3.0  # keypoint errors beyond this many standard deviations count less and less (Cauchy)
+    iterations: int = 60  # the cap on Levenberg-Marquardt steps
+    cg_iterations: int = 4  # conjugate-gradient steps for each step's linear system
+    cauchy: float = 3.0  # errors beyond this many standard deviations count less and less (Cauchy)
     direction_sigma_deg: float = 15.0  # the 3D landmarks' bone directions
     acceleration_sigma: float = 20.0  # m/s^2: a keypoint's acceleration in one frame
+    # rad/s^2: a body joint's angular acceleration in one frame. Human joints reach a few hundred in everyday and
+    # sporting motion; a joint turned round between two frames (a twist the keypoints hardly see) is thousands.
+    angular_acceleration_sigma: float = 300.0
     pose_sigma_deg: float = 60.0  # each joint's rotation from rest, what no observation decides
     hinge_sigma_deg: float = 10.0  # the fingers (index to ring) off their flexion axis
     limit_sigma_deg: float = 3.0  # beyond a joint's range
     betas_sigma: float = 1.0  # standard deviations of the shape space
-    tolerance: float | None = None  # converged below this predicted relative decrease (None: by dtype)
+    # converged when the decrease the model predicts to the optimum is below this per frame, in the cost's units
+    # (half a squared standard error, i.e. the negative log-likelihood): then every frame is within
+    # sqrt(2 * 0.1) = 0.45 standard errors of its optimum along the step, well inside what its observations decide
+    tolerance_per_frame: float = 0.1
 
 
 class ClipUnknowns(NamedTuple):
@@ -178,12 +186,18 @@ def _points(y: ClipUnknowns, data: ClipData) -> Float[Array, "T 67 3"]:
                                                                                   y.transl)
 
 
-def _motion_rows(found: Float[Array, "T"]) -> Float[Array, "T"]:
-    """1 where a frame and both its neighbours have the person (its acceleration is a residual)."""
-    if found.shape[0] < 3:
-        return jnp.zeros_like(found)
-    zero = jnp.zeros(1, found.dtype)
-    return jnp.concatenate([zero, found[:-2] * found[1:-1] * found[2:], zero])
+def _motion_rows(data: ClipData) -> Float[Array, "T 67"]:
+    """1 where a keypoint's acceleration is a residual: its part (the body, or its hand: any of the hand's keypoints
+    seen) is there in the frame and both its neighbours. Unseen, a hand's fingers hold their start, not the arm's
+    swing."""
+    hands = [jnp.any(data.confidence[:, part] > 0, -1) for part in (slice(25, 46), slice(46, 67))]
+    there = data.found[:, None] * jnp.concatenate(
+        [jnp.ones((data.found.shape[0], 25), data.found.dtype)]
+        + [jnp.repeat(seen[:, None], 21, 1).astype(data.found.dtype) for seen in hands], 1)
+    if there.shape[0] < 3:
+        return jnp.zeros_like(there)
+    zero = jnp.zeros_like(there[:1])
+    return jnp.concatenate([zero, there[:-2] * there[1:-1] * there[2:], zero])
 
 
 def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipResiduals:
@@ -194,8 +208,9 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipResidu
     u = jnp.sum(error * error, -1) / config.cauchy**2
     weight = jnp.sqrt(data.confidence * data.found[:, None])
     reprojection = weight[..., None] * error * jnp.sqrt(_log1p_ratio(u))[..., None]
-    direction = (jnp.sqrt(data.direction_weight * data.found[:, None])[..., None]
-                 * (_bones(x)[0] - data.directions) / np.radians(config.direction_sigma_deg))
+    off = (_bones(x)[0] - data.directions) / np.radians(config.direction_sigma_deg)
+    v = jnp.sum(off * off, -1) / config.cauchy**2
+    direction = (jnp.sqrt(data.direction_weight * data.found[:, None]) * jnp.sqrt(_log1p_ratio(v)))[..., None] * off
     pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
     limits = jax.nn.relu(jax.vmap(bend_of)(pose)) / np.radians(config.limit_sigma_deg)
     prior = y.pose_rotvecs / _prior_sigma_rad(config)[list(SOLVED_JOINTS)]
@@ -205,11 +220,33 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipResidu
     t = x.shape[0]
     acceleration = (jnp.concatenate([jnp.zeros_like(x[:1]), x[:-2] - 2 * x[1:-1] + x[2:], jnp.zeros_like(x[:1])])
                     if t > 2 else jnp.zeros_like(x)) * data.fps**2
-    motion = _motion_rows(data.found)[:, None, None] * acceleration / config.acceleration_sigma
+    rows = _motion_rows(data)
+    motion = rows[..., None] * acceleration / config.acceleration_sigma
+    angular = rows[:, :1, None] * _angular_accelerations(y.pose_rotvecs[:, :BODY]) * data.fps**2 / (
+        config.angular_acceleration_sigma)
     shared = jnp.where(data.fit_betas > 0, y.betas / config.betas_sigma, y.betas - data.start.betas)
     frames = jnp.concatenate([reprojection.reshape(t, -1), direction.reshape(t, -1), limits, prior.reshape(t, -1),
                               hold.reshape(t, -1)], 1)
-    return ClipResiduals(frames, motion.reshape(t, -1), shared)
+    return ClipResiduals(frames, jnp.concatenate([motion.reshape(t, -1), angular.reshape(t, -1)], 1), shared)
+
+
+def _angular_accelerations(rotvecs: Float[Array, "T J 3"]) -> Float[Array, "T J 3"]:
+    """The second differences of each joint's rotation (radians per frame squared; zero in the first and last
+    frames): the change between one frame's turn to the next and the previous one's, each turn ``log(R_t^T
+    R_t+1)`` in the joint's own axes."""
+    if rotvecs.shape[0] < 3:
+        return jnp.zeros_like(rotvecs)
+    q = rotvec_to_quat(rotvecs)
+    turns = quat_to_rotvec(_quat_product(q[:-1] * jnp.asarray([1.0, -1.0, -1.0, -1.0], q.dtype), q[1:]))
+    zero = jnp.zeros_like(rotvecs[:1])
+    return jnp.concatenate([zero, turns[1:] - turns[:-1], zero])
+
+
+def _quat_product(a: Float[Array, "... 4"], b: Float[Array, "... 4"]) -> Float[Array, "... 4"]:
+    """Hamilton's product of quaternions (w, x, y, z)."""
+    w1, v1, w2, v2 = a[..., :1], a[..., 1:], b[..., :1], b[..., 1:]
+    return jnp.concatenate([w1 * w2 - jnp.sum(v1 * v2, -1, keepdims=True),
+                            w1 * v2 + w2 * v1 + jnp.cross(v1, v2)], -1)
 
 
 BODY = 22  # the body's joints (global orientation to wrists), the first of SOLVED_JOINTS
@@ -217,32 +254,36 @@ BODY = 22  # the body's joints (global orientation to wrists), the first of SOLV
 
 class ClipBlocks(NamedTuple):
     """`preconditioner`'s blocks of ``J^T J``: the bodies' (each frame's 22 joints' increments, then its
-    translation) with their coupling over time (block-banded), each finger joint's 3x3, the shape's diagonal
-    (`clip_solver.Preconditioner`)."""
+    translation) with their coupling over time (block-banded), each frame's hands (each hand's 15 joints'
+    increments), the shape's diagonal (`clip_solver.Preconditioner`)."""
 
     body: banded.Banded  # m = 69
-    fingers: Float[Array, "T 30 3 3"]
+    hands: Float[Array, "T 2 45 45"]
     betas: Float[Array, "B"]
 
     def diagonal(self) -> Step:
         body = jnp.diagonal(self.body.diagonal, axis1=-2, axis2=-1)
-        pose = jnp.concatenate([body[:, :3 * BODY].reshape(-1, BODY, 3),
-                                jnp.diagonal(self.fingers, axis1=-2, axis2=-1)], 1)
-        return Step(pose, body[:, 3 * BODY:], self.betas)
+        hands = jnp.diagonal(self.hands, axis1=-2, axis2=-1).reshape(-1, 30, 3)
+        return Step(jnp.concatenate([body[:, :3 * BODY].reshape(-1, BODY, 3), hands], 1), body[:, 3 * BODY:],
+                    self.betas)
 
     def damped_inverse(self, shift: Step) -> Callable[[Step], Step]:
         def body_of(step):
             return jnp.concatenate([step.pose[:, :BODY].reshape(step.pose.shape[0], -1), step.transl], 1)
 
+        frames = shift.pose.shape[0]
         body = banded.factor(self.body._replace(diagonal=self.body.diagonal + jax.vmap(jnp.diag)(body_of(shift))))
-        eye = jnp.eye(3, dtype=self.fingers.dtype)
-        fingers = _inverse3(self.fingers + shift.pose[:, BODY:, :, None] * eye)
+        hands = self.hands + jax.vmap(jax.vmap(jnp.diag))(shift.pose[:, BODY:].reshape(frames, 2, 45))
+        eye = jnp.eye(45, dtype=hands.dtype)
+        # one matrix at a time (`banded`: jaxlib's batched LAPACK), then applied as a batched product
+        hands = jax.lax.map(lambda a: jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(a, lower=True), eye),
+                            hands.reshape(-1, 45, 45)).reshape(hands.shape)
         betas = 1.0 / (self.betas + shift.betas)
 
         def apply(v: Step) -> Step:
             solved = banded.solve(body, body_of(v))
-            pose = jnp.concatenate([solved[:, :3 * BODY].reshape(-1, BODY, 3),
-                                    jnp.einsum("tjab,tjb->tja", fingers, v.pose[:, BODY:])], 1)
+            fingers = jnp.einsum("thab,thb->tha", hands, v.pose[:, BODY:].reshape(frames, 2, 45))
+            pose = jnp.concatenate([solved[:, :3 * BODY].reshape(-1, BODY, 3), fingers.reshape(frames, 30, 3)], 1)
             return Step(pose, solved[:, 3 * BODY:], betas * v.betas)
 
         return apply
@@ -257,31 +298,39 @@ def _inverse3(m: Float[Array, "... 3 3"]) -> Float[Array, "... 3 3"]:
 def _frame_blocks(km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost):
     """One frame's `ClipBlocks` rows: ``image`` and ``motion`` (K, 3, 3) each keypoint's metric of its 3D
     position's change (reprojection through the pinhole, acceleration's diagonal), ``bone_metric`` (N, 3, 3) each
-    bone's of its far end's change relative to its near end (``bones``: the pairs), ``axis_weight`` (55, 3) the
-    priors' weights on the axis-angles and ``to_theta`` (55, 3, 3) their change per local increment."""
+    bone's of the change of its far end relative to its near end (``bones``: the pairs), ``axis_weight`` (55, 3)
+    the priors' weights on the axis-angles and ``to_theta`` (55, 3, 3) their change per local increment."""
     jacobian = keypoint_map.pose_jacobian(km, lin)  # (3, K, 55, 3), in the local increments
     k = jacobian.shape[1]
     body = jnp.concatenate([jnp.moveaxis(jacobian[:, :, :BODY], 0, 1).reshape(k, 3, 3 * BODY),
                             jnp.broadcast_to(jnp.eye(3, dtype=jacobian.dtype), (k, 3, 3))], -1)  # (K, 3, 69)
     metric = image + motion
+
     a, b = bones
-    across = body[b] - body[a]  # (N, 3, 69)
-    dense = (jnp.einsum("kci,kcd,kdj->ij", body, metric, body)
-             + jnp.einsum("nci,ncd,ndj->ij", across, bone_metric, across))
+    across = body[b] - body[a]
     theta = jnp.swapaxes(to_theta, -1, -2) @ (axis_weight[..., None] * to_theta)  # (55, 3, 3)
-    prior = jax.scipy.linalg.block_diag(*theta[:BODY], lost * jnp.eye(3, dtype=dense.dtype))
-    finger = jnp.moveaxis(jacobian[:, :, 25:], 0, 1)  # (K, 3, 30, 3)
-    far = jnp.zeros_like(metric).at[b].add(bone_metric)
-    fingers = jnp.einsum("kcja,kcd,kdjb->jab", finger, metric + far, finger) + theta[25:]
-    return dense + prior, fingers, body
+    dense = (jnp.einsum("kci,kcj->ij", body, metric @ body)
+             + jnp.einsum("nci,ncj->ij", across, bone_metric @ across)
+             + jax.scipy.linalg.block_diag(*theta[:BODY], lost * jnp.eye(3, dtype=body.dtype)))
+    hands = []
+    for h in range(2):  # a hand's joints move its own 21 keypoints and 20 bones alone
+        rows = np.arange(25 + 21 * h, 46 + 21 * h)
+        part = jnp.moveaxis(jacobian[:, rows, 25 + 15 * h:40 + 15 * h], 0, 1).reshape(21, 3, 45)
+        ends = np.arange(len(BODY_BONES) + 20 * h, len(BODY_BONES) + 20 * h + 20)
+        across = part[np.asarray(HAND_BONES)[:, 1]] - part[np.asarray(HAND_BONES)[:, 0]]
+        hands.append(jnp.einsum("kci,kcj->ij", part, metric[rows] @ part)
+                     + jnp.einsum("nci,ncj->ij", across, bone_metric[ends] @ across)
+                     + jax.scipy.linalg.block_diag(*theta[25 + 15 * h:40 + 15 * h]))
+    hands = jnp.stack(hands)
+    return dense, hands, body
 
 
 def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipBlocks:
     """Blocks of ``J^T J`` at ``y`` (`ClipBlocks`): of each frame's body, from the keypoints' reprojection
     (through the pinhole's Jacobian, at Cauchy's weight), their acceleration (its diagonal coefficients), the bones'
-    directions and the priors, limits and holds; of each finger joint likewise (a bone's direction on its far
-    end); the shape's diagonal. Blended skinning is left out (millimetres); any positive definite blocks make the
-    solve converge, these make it fast."""
+    directions and the priors, limits and holds; of each frame's hands likewise (their accelerations by the
+    diagonal alone, their coupling to the body left out); the shape's diagonal. Blended skinning is left out
+    (millimetres); any positive definite blocks make the solve converge, these make it fast."""
     betas = _shape(y, data)
     km = data.km
     pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
@@ -294,14 +343,17 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     projection = (data.focal_length / z)[..., None, None] * jnp.stack(
         [jnp.stack([one, zero, -x[..., 0] / z], -1), jnp.stack([zero, one, -x[..., 1] / z], -1)], -2)  # (T,K,2,3)
     image = (irls / data.sigma**2)[..., None, None] * jnp.swapaxes(projection, -1, -2) @ projection
-    rows = _motion_rows(data.found)
-    coefficient = jnp.concatenate([rows[1:], jnp.zeros(1, rows.dtype)]) + 4 * rows + jnp.concatenate(
-        [jnp.zeros(1, rows.dtype), rows[:-1]])
+    rows = _motion_rows(data)  # (T, K)
+    zero = jnp.zeros_like(rows[:1])
+    after = jnp.concatenate([rows[1:], zero])  # the next frame's row
+    coefficient = after + 4 * rows + jnp.concatenate([zero, rows[:-1]])
     eye = jnp.eye(3, dtype=x.dtype)
-    motion = (coefficient * (data.fps**2 / config.acceleration_sigma) ** 2)[:, None, None, None] * jnp.broadcast_to(
+    motion = (coefficient * (data.fps**2 / config.acceleration_sigma) ** 2)[..., None, None] * jnp.broadcast_to(
         eye, image.shape)
     unit, length = _bones(x)
-    weight = data.direction_weight * data.found[:, None] / (np.radians(config.direction_sigma_deg) * length) ** 2
+    off = jnp.sum((unit - data.directions) ** 2, -1) / (np.radians(config.direction_sigma_deg) * config.cauchy) ** 2
+    weight = (data.direction_weight * data.found[:, None] / (1.0 + off)
+              / (np.radians(config.direction_sigma_deg) * length) ** 2)
     bone_metric = weight[..., None, None] * (eye - unit[..., :, None] * unit[..., None, :])
     # the priors, limits and holds act on the axis-angle, which moves by J_l(theta)^-1 per local increment
     to_theta = _inverse3(mat3.left_jacobian(pose))  # (T, 55, 3, 3)
@@ -311,33 +363,37 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     lost = 1.0 - data.found
     axis_weight = bend + jnp.asarray(_prior_sigma_rad(config) ** -2, pose.dtype) + lost[:, None, None]
     bones = tuple(np.asarray(side) for side in zip(*BONES))
-    diagonal, fingers, jacobian = jax.vmap(_frame_blocks, in_axes=(None, 0, 0, 0, None, 0, 0, 0, 0))(
+    diagonal, hands, jacobian = jax.vmap(_frame_blocks, in_axes=(None, 0, 0, 0, None, 0, 0, 0, 0))(
         km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost)
     # the accelerations couple each frame's body with the two before and after it (`residuals`' rows, by frame)
     coupling = (data.fps**2 / config.acceleration_sigma) ** 2
 
-    def across(by):  # sum_k J[t + by]^T J[t] of each frame t, zero past the end
+    def across(by, weight):  # sum_k weight[t, k] J[t + by, k]^T J[t, k] of each frame t, zero past the end
         frames, m = jacobian.shape[0], jacobian.shape[-1]
         zero = jnp.zeros((min(by, frames), m, m), jacobian.dtype)
         if frames <= by:
             return zero
-        return jnp.concatenate([jnp.einsum("tkci,tkcj->tij", jacobian[by:], jacobian[:-by]), zero])
+        return jnp.concatenate([jnp.einsum("tkci,tk,tkcj->tij", jacobian[by:], weight[:-by], jacobian[:-by]), zero])
 
-    after = jnp.concatenate([rows[1:], jnp.zeros(1, rows.dtype)])  # the next frame's row
-    body = banded.Banded(diagonal, coupling * (-2 * rows - 2 * after)[:, None, None] * across(1),
-                         coupling * after[:, None, None] * across(2))
+    # the joints' angular accelerations likewise, each joint's turn taken as its increment's (exact on the diagonal)
+    turning = (data.fps**2 / config.angular_acceleration_sigma) ** 2 * jnp.diag(
+        jnp.concatenate([jnp.ones(3 * BODY), jnp.zeros(3)]).astype(rows.dtype))
+    body_rows, body_after = rows[:, 0], after[:, 0]
+    diagonal = diagonal + (body_after + 4 * body_rows + jnp.concatenate([zero[:, 0], body_rows[:-1]]))[
+        :, None, None] * turning
+    body = banded.Banded(diagonal,
+                         coupling * across(1, -2 * rows - 2 * after)
+                         + (-2 * body_rows - 2 * body_after)[:, None, None] * turning,
+                         coupling * across(2, after) + body_after[:, None, None] * turning)
     far = jnp.zeros_like(image).at[:, bones[1]].add(bone_metric)
     jb = lin.jb.reshape(pose.shape[0], betas.shape[0], 3, -1)  # (T, B, 3, K)
     shape = jnp.einsum("tbck,tkcd,tbdk->b", jb, image + motion + far, jb) + config.betas_sigma**-2
-    return ClipBlocks(body, fingers, jnp.where(data.fit_betas > 0, shape, 1.0))
-
-
-def _tolerance(config: ClipConfig, dtype) -> float:
-    return config.tolerance or (1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5)
+    return ClipBlocks(body, hands, jnp.where(data.fit_betas > 0, shape, 1.0))
 
 
 def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPLXParams, *,
-             focal_length: float | Float[ArrayLike, ""], principal_point: Float[ArrayLike, "2"], fps: float,
+             focal_length: float | Float[ArrayLike, ""], principal_point: Float[ArrayLike, "2"],
+             fps: float | Float[ArrayLike, ""],
              keypoint_sigma_px: Float[ArrayLike, "T 67"], directions: Float[ArrayLike, "T N 3"] | None = None,
              direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
              fit_betas: bool = True, config: ClipConfig | None = None,
@@ -374,8 +430,8 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
                     jnp.asarray(direction_weight, dtype), found_f, start, pose[:, list(FIXED_JOINTS)],
                     jnp.asarray(focal_length, dtype), jnp.asarray(principal_point, dtype), jnp.asarray(fps, dtype),
                     jnp.asarray(1.0 if fit_betas else 0.0, dtype))
-    solver = ClipLevenbergMarquardt(rtol=_tolerance(config, dtype), fit_shared=fit_betas,
-                                    cg_iterations=config.cg_iterations)
+    solver = ClipLevenbergMarquardt(tolerance=config.tolerance_per_frame * jnp.maximum(jnp.sum(found_f), 1.0),
+                                    fit_shared=fit_betas, cg_iterations=config.cg_iterations)
     blocks = jax.tree_util.Partial(preconditioner, config=config)
     solution = optx.least_squares(jax.tree_util.Partial(residuals, config=config), solver, start, data,
                                   options=dict(preconditioner=blocks), max_steps=config.iterations, throw=False,

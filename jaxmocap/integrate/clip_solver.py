@@ -4,15 +4,15 @@ An `optimistix.AbstractLeastSquaresSolver` for unknowns ``(pose_rotvecs (T, J, 3
 (`clip.ClipUnknowns`). Each step linearises ``fn`` itself (`jax.linearize`, and its transpose), so the gradient
 ``J^T r`` is exact and ``J^T J v`` costs one forward and one backward pass over the clip, whatever couples the
 frames; the damped Gauss-Newton system ``(J^T J + mu D) d = -J^T r`` is solved by conjugate gradients,
-preconditioned by blocks of ``J^T J`` that ``options["preconditioner"](y, args)`` gives (`Preconditioner`;
-`clip.preconditioner`; computed again every `REFRESH_STEPS` steps), ``D`` their diagonal. Work and memory are
+preconditioned by blocks of ``J^T J`` that ``options["preconditioner"](y, args)`` gives at each step
+(`Preconditioner`; `clip.preconditioner`), ``D`` their diagonal. Work and memory are
 linear in the number of frames.
 
 Rotations move by local increments, ``R <- exp(dphi) R`` (`levenberg_marquardt.retract`), translations and the
 shape by addition. ``mu`` follows Nielsen's rule; the solve has converged when, at damping at most 1, half the
 Newton decrement with the preconditioner's blocks for ``J^T J`` (``g^T P^-1 g / 2``, the decrease the model
-predicts) falls below ``rtol`` of the cost, and stops unconverged when refused steps raise the damping to
-`MAX_DAMPING`.
+predicts were it at the optimum in one step) falls below ``tolerance`` (in the cost's units), and stops
+unconverged when refused steps raise the damping to `MAX_DAMPING`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import lineax as lx
 import optimistix as optx
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
 from jaxmocap.integrate.least_squares import Unknowns
 from jaxmocap.integrate.levenberg_marquardt import retract
@@ -69,35 +69,30 @@ def cost_of(r) -> Float[Array, ""]:
     return 0.5 * sum(jnp.sum(leaf * leaf) for leaf in jax.tree.leaves(r))
 
 
-REFRESH_STEPS = 5  # the preconditioner's blocks are computed again after this many steps (they change slowly)
-
-
 class _State(NamedTuple):
     cost: Float[Array, ""]
     damping: Float[Array, ""]
     growth: Float[Array, ""]
     converged: Bool[Array, ""]
-    blocks: Preconditioner
-    age: Int[Array, ""]  # steps since the blocks were computed
 
 
 class ClipLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     """Matrix-free Levenberg-Marquardt (module docstring). ``fit_shared``: whether the shape is solved for (else it
-    keeps its value); ``rtol``: the predicted relative decrease below which it has converged; ``cg_iterations``:
-    the conjugate-gradient steps of each step's system."""
+    keeps its value); ``tolerance``: the predicted decrease of the cost below which it has converged;
+    ``cg_iterations``: the conjugate-gradient steps of each step's system."""
 
-    rtol: float
+    tolerance: Float[Array, ""]
     fit_shared: bool = eqx.field(static=True, default=True)
     cg_iterations: int = eqx.field(static=True, default=10)
-    atol: float = 0.0  # unused: the test is relative
+    rtol: float = 0.0  # unused: the test is `tolerance`
+    atol: float = 0.0  # unused
     norm: Callable = optx.max_norm  # unused
     initial_damping: float = 1e-2
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         cost = cost_of(fn(y, args)[0])
         one = jnp.ones((), cost.dtype)
-        return _State(cost, self.initial_damping * one, 2.0 * one, jnp.array(False),
-                      options["preconditioner"](y, args), jnp.zeros((), jnp.int32))
+        return _State(cost, self.initial_damping * one, 2.0 * one, jnp.array(False))
 
     def _zero(self, y) -> Step:
         return Step(jnp.zeros_like(y.pose_rotvecs), jnp.zeros_like(y.transl),
@@ -112,8 +107,7 @@ class ClipLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             return v if self.fit_shared else v._replace(betas=jnp.zeros_like(v.betas))
 
         gradient = keep_shape(transpose(r)[0])
-        blocks = jax.lax.cond(state.age >= REFRESH_STEPS, lambda: options["preconditioner"](y, args),
-                              lambda: state.blocks)
+        blocks = options["preconditioner"](y, args)
         diagonal = blocks.diagonal()
         floor = jax.tree.map(lambda d: 1e-9 * jnp.max(d) + 1e-30, diagonal)
         shift = jax.tree.map(lambda d, f: state.damping * jnp.maximum(d, f), diagonal, floor)
@@ -140,12 +134,11 @@ class ClipLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # the decrease a step would predict were the blocks the whole Gauss-Newton matrix (half the Newton
         # decrement): unlike the step's own, it does not shrink when the conjugate gradients fall short
         decrement = 0.5 * _dot(gradient, inverse(gradient))
-        converged = (decrement <= self.rtol * state.cost) & (state.damping <= 1.0)
+        converged = (decrement <= self.tolerance) & (state.damping <= 1.0)
         damping = jnp.where(accept, state.damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3),
                             state.damping * state.growth)
         new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING),
-                     jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged, blocks,
-                     jnp.where(state.age >= REFRESH_STEPS, 0, state.age + 1))
+                     jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):

@@ -22,8 +22,11 @@ from jaxmocap.batching import map_in_buckets
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.fitting import BUCKETS, default_pose
-from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
-from smplx_jax import BodyModel, constants
+from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm, params_of
+from smplx_jax import BodyModel, constants, forward_joints
+from smplx_jax.rotations import rotmat_to_rotvec
+
+forward_joints_jit = jax.jit(forward_joints)
 
 # BlazePose landmark -> SMPL-X output joint (127-joint index); eyes/ears/heels/toes are vertex joints.
 BLAZEPOSE_TO_SMPLX = {0: 55, 2: 57, 5: 56, 7: 59, 8: 58, 11: 16, 12: 17, 13: 18, 14: 19, 15: 20, 16: 21, 23: 1,
@@ -104,14 +107,43 @@ def ik(model: BodyModel, index, targets, conf, theta, betas, free_joints, *, fit
     return map_in_buckets(lambda chunk, _: _ik_batch(km, *chunk, free, fit_shape, config), frames, BUCKETS)
 
 
+TORSO_LANDMARKS = (11, 12, 23, 24)  # BlazePose's shoulders and hips
+TORSO_JOINTS = (16, 17, 1, 2)  # SMPL-X's
+
+
+def torso_orientation(model: BodyModel, world: np.ndarray) -> np.ndarray:
+    """``(T, 3)`` axis-angles: the global orientation that turns the torso of `default_pose` (shoulders and hips,
+    its own orientation left out) onto BlazePose's world landmarks ``(T, 33, 3+)`` of each frame, by the rotation of
+    least squares between the two centred point sets (Kabsch). A frame whose torso is not seen keeps the default's.
+    IK starting from upright in image axes turns a body seen askew or lying the shorter way round, which can leave
+    it facing backwards; the torso's rotation is the start that holds for any camera's roll."""
+    rest_pose = np.asarray(default_pose(np.float32)).copy()
+    rest_pose[0] = 0.0
+    rest = np.asarray(forward_joints_jit(model, params_of(jnp.asarray(rest_pose), jnp.zeros(model.num_betas,
+                                                                                           jnp.float32),
+                                                          model.num_expression)))[list(TORSO_JOINTS)]
+    rest = rest - rest.mean(0)
+    torso = np.asarray(world, np.float64)[:, list(TORSO_LANDMARKS), :3]
+    torso = torso - torso.mean(1, keepdims=True)
+    u, _, vt = np.linalg.svd(np.einsum("ji,tjk->tik", rest, torso))  # rest^T torso of each frame
+    reflect = np.sign(np.linalg.det(u @ vt))
+    rotation = np.swapaxes((u * np.stack([np.ones_like(reflect), np.ones_like(reflect), reflect], -1)[:, None])
+                           @ vt, 1, 2)  # torso ~ rest @ rotation^T
+    rotvecs = np.asarray(rotmat_to_rotvec(rotation.astype(np.float32)))
+    seen = np.all(np.isfinite(torso), (1, 2)) & (np.linalg.norm(torso, axis=-1).min(1) > 1e-6)
+    return np.where(seen[:, None], rotvecs, np.asarray(default_pose())[0])
+
+
 def body_from_blazepose(model: BodyModel, world: np.ndarray, theta=None, betas=None, config=None):
     """Body pose from BlazePose world landmarks ``(T, 33, 3)`` (or ``(T, 33, 4)`` with visibility as confidence).
-    Starts from ``theta`` (default `default_pose`); wrists and hands are kept."""
+    Starts from ``theta`` (default `default_pose` turned by `torso_orientation`); wrists and hands are kept."""
     world = np.asarray(world, np.float32)
     t = world.shape[0]
     targets, conf = blazepose_targets(world)
     conf = np.broadcast_to(conf, targets.shape[:2])
-    theta = np.broadcast_to(np.asarray(default_pose()), (t, 55, 3)) if theta is None else theta
+    if theta is None:
+        theta = np.broadcast_to(np.asarray(default_pose()), (t, 55, 3)).copy()
+        theta[:, 0] = torso_orientation(model, world)
     betas = np.zeros((t, model.num_betas), np.float32) if betas is None else betas
     return ik(model, BLAZEPOSE_JOINTS, targets, conf, theta, betas, BODY_IK_JOINTS, config=config)
 

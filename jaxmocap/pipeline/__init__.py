@@ -5,11 +5,12 @@
 
 Modules: `config` (`RunConfig`), `entry` (`run`, every mode's entry), `job` (`run_bodies`, ``--mode whole`` and
 ``body``, which reads as its stages), `hands_job` (`run_hands`, ``--mode hands``: hands alone, ``hands.npz``),
-`stages` (observations -> initial bodies -> fits -> smoothed -> motion arrays), `regress` (FrankMocap's regressors
-in place of IK and fit), `records` (what the stages hand each other), `report` (`RunReport`), `chunks` (frames in
-chunks and the resumable chunk store), `outputs` (OpenPose JSON, overlay, exports, FrankMocap pickles), `observe`
-(the detector's person as arrays, repaired), `fit_folder` (``jaxmocap fit``), `chrono` (stage timing), `exemplar`
-and `hand_boxes` (parts of the regressors' path). Imports run one way: `entry` -> the jobs -> the rest.
+`stages` (observations -> initial bodies -> the clip fit -> motion arrays), `whole_clip` (each person's whole
+clip as one fit, in windows by frame number), `regress` (FrankMocap's regressors in place of IK and the clip fit),
+`records` (what the stages hand each other), `report` (`RunReport`), `chunks` (frames in chunks and the resumable
+chunk store), `outputs` (OpenPose JSON, overlay, exports, FrankMocap pickles), `observe` (the detector's person
+as arrays, repaired), `fit_folder` (``jaxmocap fit``), `chrono` (stage timing), `exemplar` and `hand_boxes` (parts
+of the regressors' path). Imports run one way: `entry` -> the jobs -> the rest.
 """
 
 from jaxmocap.pipeline.config import RunConfig
@@ -17,7 +18,8 @@ from jaxmocap.pipeline.entry import run
 from jaxmocap.pipeline.observe import Observations, observe
 from jaxmocap.pipeline.records import Bodies, Chunk
 from jaxmocap.pipeline.report import RunReport
-from jaxmocap.pipeline.stages import fitted_bodies, initial_bodies, motion_arrays, observations, smoothed
+from jaxmocap.pipeline.stages import initial_bodies, motion_arrays, observations, smoothed
+from jaxmocap.pipeline.whole_clip import fitted_track
 
-__all__ = ["Bodies", "Chunk", "Observations", "RunConfig", "RunReport", "fitted_bodies", "initial_bodies",
+__all__ = ["Bodies", "Chunk", "Observations", "RunConfig", "RunReport", "fitted_track", "initial_bodies",
            "motion_arrays", "observations", "observe", "run", "smoothed"]

@@ -23,12 +23,10 @@ from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import available_landmarks
 from jaxmocap.frame_source import Media, open_media
-from jaxmocap.integrate import FitConfig
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
-from jaxmocap.pipeline.coherent import coherent, girdle_untwisted
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
@@ -38,19 +36,19 @@ from jaxmocap.pipeline.records import Bodies, Chunk, Track
 from jaxmocap.pipeline.regress import Regression, regressed_bodies
 from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import (
-    FIT_FROM_IK,
     Lens,
-    fitted_bodies,
     initial_bodies,
     lens_of,
     motion_arrays,
     observations,
     one_shape,
+    placed_bodies,
     smoothed,
 )
+from jaxmocap.pipeline.whole_clip import fitted_track
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
-SETTINGS_VERSION = 7  # of the stored chunks: bump when what a chunk holds changes
+SETTINGS_VERSION = 8  # of the stored chunks: bump when what a chunk holds changes
 
 
 @dataclass(frozen=True)
@@ -76,7 +74,8 @@ class Inputs:
             config.weights, model, config.hand_boxes if config.mode == "whole" else None)
         given = None if config.keypoints is None else keypoints_by_frame(config.keypoints)
         media, frames = open_media(config.source, config.start, config.end, config.stride)
-        lens = lens_of(media.size, config.focal_length) if regression is None else (None, None)
+        clip_fit = regression is None or config.integration == "optimize"  # (`_clip_fitted`): a pinhole camera
+        lens = lens_of(media.size, config.focal_length) if clip_fit else (None, None)
         landmarks = available_landmarks(config.landmarks)
         return cls(model, file_sha256(model_path), regression, given, media, frames, lens, landmarks)
 
@@ -100,18 +99,17 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         video = inputs.media.kind in ("video", "webcam")
         tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
                                     config.max_people)
-        refit = shape_fit(config, inputs)
+        fit = _clip_fitted(config, inputs)
 
         def person_bodies(track):
-            bodies = one_shape(inputs.model, track.bodies, track.keypoints_2d, inputs.lens, *refit)
-            if refit[0] is None:  # the regressors' output as it is (copy-and-paste, EFT alone)
-                return bodies
-            bodies = girdle_untwisted(inputs.model, bodies)
-            return coherent(inputs.model, bodies, track.keypoints_2d, inputs.lens, *refit) if video else bodies
+            if fit:  # the whole clip as one fit
+                return fitted_track(inputs.model, track, inputs.lens,
+                                    inputs.media.fps if video and config.smooth else None)
+            return one_shape(inputs.model, track.bodies, track.keypoints_2d, inputs.lens, None)  # as regressed
 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
     with chrono("smooth"):
-        if config.smooth:
+        if config.smooth and not fit:  # (the clip fit's motion term is its smoothing)
             tracks = {i: dataclasses.replace(t, bodies=smoothed(inputs.model, t.bodies, t.keypoints_2d, inputs.lens))
                       for i, t in tracks.items()}
     with chrono("write"):
@@ -131,12 +129,10 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
                      inputs.landmarks)
 
 
-def shape_fit(config: RunConfig, inputs: Inputs) -> tuple[FitConfig | None, int]:
-    """How `one_shape` fits the poses again with the person's shape: as the run's fit did (none after the
-    regressors' copy-and-paste or EFT alone)."""
-    if inputs.regression is None:
-        return FIT_FROM_IK, config.iterations
-    return (FitConfig() if config.integration == "optimize" else None), config.iterations
+def _clip_fitted(config: RunConfig, inputs: Inputs) -> bool:
+    """Whether the run's motion is the clip fit (`fitted_track`): the embedded default, and the regressors' bodies
+    with ``--integration optimize``; copy-and-paste and EFT keep the regressors' bodies as they are."""
+    return inputs.regression is None or config.integration == "optimize"
 
 
 def main_person(motions: dict[int, dict]) -> int | None:
@@ -194,15 +190,16 @@ def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: 
     for person_id, obs in people.items():
         if inputs.regression is None:
             with chrono("ik"):
-                init = initial_bodies(inputs.model, obs)
-            with chrono("fit"):
-                bodies = fitted_bodies(inputs.model, obs, init, inputs.lens, config.iterations)
+                bodies = initial_bodies(inputs.model, obs, inputs.lens)
             hand_boxes = obs.hand_boxes
         else:
-            with chrono("regress+integrate"):
+            with chrono("regress"):
                 bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, obs,
-                                                      config.integration, config.iterations)
-        tracks[person_id] = Track(obs.keypoints, obs.body_box, hand_boxes, obs.found, bodies)
+                                                      config.integration)
+                if _clip_fitted(config, inputs):  # the clip fit's start
+                    bodies = placed_bodies(inputs.model, bodies.params, obs.keypoints, inputs.lens, bodies.valid)
+        tracks[person_id] = Track(obs.keypoints, obs.body_box, hand_boxes, obs.found, obs.body_world,
+                                  obs.hands_world, obs.hands_conf, bodies)
     chunk = Chunk(ids, tracks, _tracking(detector, tracker))
     if observed is not None:
         observed(chunk, people)

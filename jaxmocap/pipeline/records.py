@@ -43,18 +43,24 @@ class Bodies:
 @jax.tree_util.register_dataclass
 @dataclass(frozen=True)
 class Track:
-    """One person over the ``n`` frames of a chunk, after detection and the fit (or the regressors)."""
+    """One person over the ``n`` frames of a chunk, after detection and the per-frame stages (the clip fit's start,
+    or the regressors)."""
 
     keypoints_2d: np.ndarray  # (n, 67, 3) the fit's targets: OpenPose BODY_25 + hands, pixels, confidence
     body_box: np.ndarray  # (n, 4) x0, y0, x1, y1 pixels, NaN when missing
     hand_boxes: np.ndarray  # (n, 2, 4) left, right: the hand crops used, NaN when missing
     found: np.ndarray  # (n,) bool: the detector found the person
+    body_world: np.ndarray  # (n, 33, 4) BlazePose's world landmarks (metres) and visibility
+    hands_world: np.ndarray  # (n, 2, 21, 3) each hand's world landmarks (metres)
+    hands_conf: np.ndarray  # (n, 2) each hand's presence, 0 when missing
     bodies: Bodies
 
     @classmethod
     def absent(cls, count: int, model) -> "Track":
         return cls(np.zeros((count, 67, 3), np.float32), np.full((count, 4), np.nan), np.full((count, 2, 4), np.nan),
-                   np.zeros(count, bool), Bodies.absent(count, model))
+                   np.zeros(count, bool), np.zeros((count, 33, 4), np.float32),
+                   np.zeros((count, 2, 21, 3), np.float32), np.zeros((count, 2), np.float32),
+                   Bodies.absent(count, model))
 
     @classmethod
     def concatenate(cls, parts: list["Track"]) -> "Track":
@@ -88,5 +94,6 @@ class Chunk:
             a = {k.split("/", 1)[1]: v for k, v in arrays.items() if k.startswith(f"{person_id}/")}
             params = smplx_jax.SMPLXParams(**{f.name: a[f.name] for f in dataclasses.fields(smplx_jax.SMPLXParams)})
             bodies = Bodies(params, a["camera_scale"], a["camera_trans"], a["valid"])
-            people[person_id] = Track(a["keypoints_2d"], a["body_box"], a["hand_boxes"], a["found"], bodies)
+            people[person_id] = Track(a["keypoints_2d"], a["body_box"], a["hand_boxes"], a["found"], a["body_world"],
+                                      a["hands_world"], a["hands_conf"], bodies)
         return cls(arrays["frame_index"], people, tracking)

@@ -1,4 +1,5 @@
-"""The FrankMocap path: body and hand regressors on the detector's boxes, copy-and-paste, optionally the fit."""
+"""The FrankMocap path: body and hand regressors on the detector's boxes, copy-and-paste (optionally the body
+fine-tuned per frame, EFT)."""
 
 from dataclasses import dataclass
 
@@ -7,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
-from jaxmocap.integrate import copy_paste, fit
+from jaxmocap.integrate import copy_paste
 from jaxmocap.pipeline.exemplar import fine_tuned_bodies
 from jaxmocap.pipeline.hand_boxes import hand_boxes_from_body
 from jaxmocap.pipeline.observe import Observations
@@ -79,20 +80,15 @@ def _regress(model, reg: Regression, frames, obs: Observations, rows, eft: bool)
     return pasted, np.asarray(scale), np.asarray(trans), body_ok, hand_boxes
 
 
-def regressed_bodies(model, reg: Regression, frames, obs: Observations, integration: str, iterations: int
+def regressed_bodies(model, reg: Regression, frames, obs: Observations, integration: str
                      ) -> tuple[Bodies, np.ndarray]:
     """Per-frame bodies of one chunk from the regressors (the body fine-tuned per frame with ``integration ==
-    "eft"``) + copy-and-paste (+ the fit with ``integration == "optimize"``), and the hand boxes (N, 2, 4) the hand
-    regressor used."""
+    "eft"``) + copy-and-paste, their weak-perspective cameras, and the hand boxes (N, 2, 4) the hand regressor
+    used."""
     parts = [_regress(model, reg, frames, obs, np.arange(s, min(s + FRAMES_PER_BATCH, len(frames))),
                       integration == "eft")
              for s in range(0, len(frames), FRAMES_PER_BATCH)]
     params = jax.tree.map(lambda *a: jnp.concatenate(a), *[p[0] for p in parts])
     scale, trans, ok, hand_boxes = (np.concatenate([p[k] for p in parts]) for k in (1, 2, 3, 4))
     ok = ok & obs.found & (scale > 0)
-    if integration == "optimize":
-        result = fit(model, obs.keypoints, init=params, camera_scale=np.where(ok, scale, 1.0),
-                     camera_trans=np.where(ok[:, None], trans, 0.0), iterations=iterations)
-        params, scale, trans = result.params, np.asarray(result.camera_scale), np.asarray(result.camera_trans)
-        ok = ok & np.asarray(result.valid)
     return Bodies(jax.tree.map(np.asarray, params), scale, trans, ok), hand_boxes

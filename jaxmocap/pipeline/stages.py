@@ -1,8 +1,10 @@
 """The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector, each person by identity) ->
-for each person `initial_bodies` (IK from the 3D landmarks) -> `fitted_bodies` (the fit to the 2D keypoints); with
-FrankMocap's weights the regressors (`regress.regressed_bodies`) stand in for the middle two. Over the whole
-sequence, for each person (split tracks joined: `merge_tracks`): `one_shape` -> in a video `coherent.coherent` (one
-facing through time) -> `smoothed` -> `motion_arrays` (what ``motion.npz`` holds); then the outputs (`outputs`)."""
+for each person `initial_bodies` (IK from the 3D landmarks, placed in the camera). Over the whole sequence, for
+each person (split tracks joined: `merge_tracks`): `whole_clip.fitted_track` (one fit of the person's whole clip:
+the 2D keypoints, the 3D landmarks, anatomy, motion, one shape) -> `motion_arrays` (what ``motion.npz`` holds);
+then the outputs (`outputs`). With FrankMocap's weights the regressors (`regress.regressed_bodies`) give each
+frame's start instead (`placed_bodies`); with ``--integration copy-paste`` or ``eft`` their bodies are the motion
+as they are: `one_shape` (their median shape) -> `smoothed`."""
 
 import dataclasses
 
@@ -14,8 +16,9 @@ import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.integrate import FitConfig, body_from_blazepose, fit, fitted_motion, hand_into_body
-from jaxmocap.integrate.camera import default_focal_length
-from jaxmocap.integrate.fitting import params_from_full_pose
+from jaxmocap.integrate.camera import default_focal_length, weak_perspective_from_points
+from jaxmocap.integrate.fitting import openpose_keypoint_model, params_from_full_pose
+from jaxmocap.integrate.keypoints import keypoints_cm
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.integrate.smooth import smooth_camera, smooth_params
 from jaxmocap.pipeline.observe import Observations, observe_people, repaired
@@ -38,10 +41,11 @@ def observations(detector: Detector, tracker: IdentityTracker | None, frames: li
     return people
 
 
-def initial_bodies(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SMPLXParams:
-    """The fit's start for each frame: IK of the body to BlazePose's world landmarks, then of each hand to its
-    landmarks with the body fixed (batched `SMPLXParams`; a hand seen in none of the frames, as with
-    ``--mode body``, is left as the body IK starts it: flat)."""
+def initial_poses(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SMPLXParams:
+    """Each frame's pose from its 3D landmarks: IK of the body to BlazePose's world landmarks (starting from the
+    torso's orientation), then of each hand to its landmarks with the body fixed (batched `SMPLXParams`, no
+    translation; a hand seen in none of the frames, as with ``--mode body``, is left as the body IK starts it:
+    flat)."""
     theta, betas, _, _ = body_from_blazepose(model, obs.body_world)
     for side, name in enumerate(("left", "right")):
         if not np.any(obs.hands_conf[:, side] > 0):
@@ -51,9 +55,38 @@ def initial_bodies(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.S
     return jax.block_until_ready(params_from_full_pose(jnp.asarray(theta), jnp.asarray(betas), model.num_expression))
 
 
-# The fit from the IK start: the start already holds BlazePose's 3D (depth, twists) that the 2D keypoints do not see,
-# so the prior keeps the fit near it (0.1 m/rad; the generic fit's 0.02 lets depth drift: 3D error up on real
-# footage, docs/BENCHMARKS.md).
+@jax.jit
+def _placed(km, params, keypoints, focal_length, principal_point):
+    """Each pose's translation in the camera frame: the depth and offset at which its keypoints' spread and
+    centre match the 2D keypoints' (`weak_perspective_from_points`, as a pinhole camera sees the body's origin),
+    and that camera."""
+    def one(p, k):
+        points = keypoints_cm(km, p.full_pose(), p.betas)
+        scale, trans = weak_perspective_from_points(points[:2].T, k[:, :2], jnp.where(k[:, 2] > 0, k[:, 2], 0.0))
+        return jnp.append((trans - principal_point) / scale, focal_length / scale), scale, trans
+
+    transl, scale, trans = jax.vmap(one)(params, keypoints)
+    return params.replace(transl=transl), scale, trans
+
+
+def placed_bodies(model: smplx_jax.BodyModel, params: smplx_jax.SMPLXParams, keypoints_2d: np.ndarray, lens: Lens,
+                  valid: np.ndarray) -> Bodies:
+    """Each frame's pose (batched ``params``) placed in the pinhole camera ``lens`` (`_placed`) on its 2D keypoints
+    ``(T, 67, 3)``: a start for the clip fit."""
+    params, scale, trans = _placed(openpose_keypoint_model(model), params, np.asarray(keypoints_2d, np.float32),
+                                   np.float32(lens[0]), np.asarray(lens[1], np.float32))
+    return Bodies(jax.tree.map(np.asarray, params), np.asarray(scale), np.asarray(trans), np.asarray(valid))
+
+
+def initial_bodies(model: smplx_jax.BodyModel, obs: Observations, lens: Lens) -> Bodies:
+    """The clip fit's start for each frame: `initial_poses` placed in the pinhole camera ``lens``; valid where the
+    person was found."""
+    return placed_bodies(model, initial_poses(model, obs), obs.keypoints, lens, obs.found)
+
+
+# Live capture's fit of each frame from its IK start (`live.causal`): the start already holds BlazePose's 3D (depth,
+# twists) that the 2D keypoints do not see, so the prior keeps the fit near it (0.1 m/rad; the generic fit's 0.02
+# lets depth drift: 3D error up on real footage, docs/BENCHMARKS.md).
 FIT_FROM_IK = FitConfig(prior_body=0.1, prior_finger_hinge=0.05, prior_finger_range=0.2, linear_solver="cg")
 
 
@@ -61,16 +94,6 @@ def lens_of(image_size: tuple[int, int], focal_length: float | None = None) -> L
     """The pinhole camera of a run: ``focal_length`` pixels (default `default_focal_length`), centred on the image
     of ``image_size`` (width, height)."""
     return focal_length or default_focal_length(image_size), np.asarray(image_size, np.float32) / 2
-
-
-def fitted_bodies(model: smplx_jax.BodyModel, obs: Observations, init: smplx_jax.SMPLXParams, lens: Lens,
-                  iterations: int = 20) -> Bodies:
-    """The fit of each frame to its 2D keypoints from ``init`` through the pinhole camera ``lens``; valid where the
-    person was found and the fit succeeded."""
-    result = jax.block_until_ready(fit(model, obs.keypoints, init=init, focal_length=lens[0],
-                                       principal_point=lens[1], iterations=iterations, config=FIT_FROM_IK))
-    return Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
-                  np.asarray(result.camera_trans), obs.found & np.asarray(result.valid))
 
 
 def one_shape(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens,

@@ -1,0 +1,160 @@
+"""Each person's motion over the whole run as one fit (`jaxmocap.integrate.fit_clip`), in windows placed by frame
+number: what the fit observes of a track (each keypoint's detector noise, the bones' directions from the 3D
+landmarks in the camera's axes), one shape for the person from frames spread over the run, then the poses and
+translations window by window with that shape held. A window's result depends only on the frames it covers, so
+the motion is the same whatever chunks the run was stored in, in time linear in the run's length and memory flat.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import smplx_jax
+from jaxmocap.compile_cache import disk_jit
+from jaxmocap.integrate import ClipConfig, fit_clip
+from jaxmocap.integrate.camera import weak_perspective_least_squares
+from jaxmocap.integrate.clip import BLAZEPOSE_OF_BODY25, BODY_BONES, HAND_BONES, points_3d
+from jaxmocap.integrate.fitting import openpose_keypoint_model
+from jaxmocap.pipeline.records import Bodies, Track
+from smplx_jax.rotations import rotvec_to_rotmat
+
+# The landmark models' 2D noise, a share of the extent of what they crop: a few pixels of their 256- or 224-pixel
+# inputs, whose crops span 1.25-2 times the person or the hand; and never below one pixel of the image, whose
+# sampling (and compression) no detector sees through.
+NOISE = 0.01
+NOISE_FLOOR_PX = 1.0
+# Windows: each keeps WINDOW frames and is fitted with MARGIN more on each side, left out of its result. The motion
+# term ties a frame to the next ones over about sqrt(keypoint noise / (acceleration sigma * frame time^2)) frames
+# (a couple at 30-60 frames/s), so a window's frames near its edges see what they would in one fit of the clip.
+WINDOW = 64
+MARGIN = 8
+# The shape's ten numbers are fitted on this many frames spread over the track (each gives over a hundred keypoint
+# coordinates and their bones' directions), then held in every window.
+SHAPE_FRAMES = 32
+HAND_SLICES = (slice(25, 46), slice(46, 67))
+
+
+def keypoint_noise_px(keypoints: np.ndarray) -> np.ndarray:
+    """``(T, 67)`` each keypoint's detector noise in pixels: `NOISE` times the larger side of the box of the seen
+    keypoints of its body (BODY_25) or its hand, at least `NOISE_FLOOR_PX`."""
+    def extent(part):
+        seen = part[..., 2] > 0
+        low = np.where(seen[..., None], part[..., :2], np.inf).min(1)
+        high = np.where(seen[..., None], part[..., :2], -np.inf).max(1)
+        side = np.max(high - low, -1)
+        return np.where(np.isfinite(side) & (side > 0), side, 1.0)
+
+    keypoints = np.asarray(keypoints, np.float64)
+    sigma = np.empty(keypoints.shape[:2])
+    for part in (slice(0, 25), *HAND_SLICES):
+        sigma[:, part] = np.maximum(NOISE * extent(keypoints[:, part]), NOISE_FLOOR_PX)[:, None]
+    return sigma.astype(np.float32)
+
+
+def _ray_rotations(pixels: np.ndarray, lens) -> np.ndarray:
+    """``(T, 3, 3)``: the rotations taking the camera's axis onto the ray through each pixel ``(T, 2)``. A landmark
+    model sees its crop from the ray through the crop, not along the camera's axis: its 3D landmarks are turned by
+    this into the camera's axes."""
+    focal, centre = lens
+    ray = np.concatenate([(pixels - centre) / focal, np.ones((len(pixels), 1))], 1)
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    axis = np.cross([0.0, 0.0, 1.0], ray)
+    sine = np.linalg.norm(axis, axis=1, keepdims=True)
+    rotvec = np.where(sine > 0, axis / np.maximum(sine, 1e-12), 0.0) * np.arctan2(sine, ray[:, 2:])
+    return np.asarray(rotvec_to_rotmat(rotvec.astype(np.float32)), np.float64)
+
+
+def _unit(vectors, weight):
+    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    ok = length[..., 0] > 1e-6
+    return np.where(ok[..., None], vectors / np.maximum(length, 1e-6), 0.0), np.where(ok, weight, 0.0)
+
+
+def bone_directions(track: Track, lens) -> tuple[np.ndarray, np.ndarray]:
+    """The directions of `clip.BONES` ``(T, N, 3)`` that the 3D landmarks give, in the camera's axes (each set
+    turned by `_ray_rotations` at its body's or hand's pixel), and their confidence ``(T, N)``: a body bone's the
+    lower visibility of its ends, a hand bone's the hand's presence; 0 where not seen."""
+    keypoints = np.asarray(track.keypoints_2d, np.float64)
+    seen = keypoints[:, :25, 2] > 0
+    centre = np.where(keypoints[:, 8:9, 2] > 0, keypoints[:, 8, :2],
+                      np.sum(np.where(seen[..., None], keypoints[:, :25, :2], 0.0), 1)
+                      / np.maximum(seen.sum(1), 1)[:, None])
+    turn = _ray_rotations(centre, lens)
+    world = np.asarray(track.body_world, np.float64)
+    a, b = (np.asarray([BLAZEPOSE_OF_BODY25[k] for k in side]) for side in zip(*BODY_BONES))
+    body, body_weight = _unit(np.einsum("tij,tnj->tni", turn, world[:, b, :3] - world[:, a, :3]),
+                              np.minimum(world[:, a, 3], world[:, b, 3]))
+    parts, weights = [body], [body_weight]
+    for side, part in enumerate(HAND_SLICES):
+        wrist = keypoints[:, part][:, 0]
+        hand_turn = np.where((wrist[:, 2] > 0)[:, None, None], _ray_rotations(wrist[:, :2], lens), turn)
+        hand = np.asarray(track.hands_world[:, side], np.float64)
+        a, b = (np.asarray(ends) for ends in zip(*HAND_BONES))
+        unit, weight = _unit(np.einsum("tij,tnj->tni", hand_turn, hand[:, b] - hand[:, a]),
+                             np.broadcast_to(np.asarray(track.hands_conf[:, side], np.float64)[:, None],
+                                             (len(hand), len(a))))
+        parts.append(unit)
+        weights.append(weight)
+    found = np.asarray(track.found)[:, None]
+    return (np.concatenate(parts, 1).astype(np.float32),
+            np.where(found, np.concatenate(weights, 1), 0.0).astype(np.float32))
+
+
+@disk_jit(static_argnames=("fit_betas", "config"))
+def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
+         fit_betas: bool, config: ClipConfig):
+    return fit_clip(model, keypoints, start, focal_length=focal_length, principal_point=principal_point, fps=fps,
+                    keypoint_sigma_px=sigma, directions=directions, direction_weight=weight, found=found,
+                    fit_betas=fit_betas, config=config)
+
+
+@jax.jit
+def _weak_cameras(km, params, focal_length, principal_point, confidence):
+    """The weak-perspective camera closest to the pinhole's projection of each frame's keypoints."""
+    def one(p, conf):
+        x = points_3d(km, p.full_pose(), p.betas, p.transl)
+        pixels = focal_length * x[:, :2] / x[:, 2:] + principal_point
+        return weak_perspective_least_squares(x[:, :2], pixels, jnp.where(conf > 0, 1.0, 0.1))
+
+    return jax.vmap(one)(params, confidence)
+
+
+def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | None,
+                 config: ClipConfig = ClipConfig()) -> Bodies:
+    """The track's bodies as one fit (module docstring) through the pinhole ``lens``: ``track.bodies`` is each
+    frame's start (its ``transl`` in the camera frame); ``fps`` the frame rate (None: unrelated images, no motion
+    between them). Valid where the start was."""
+    valid = np.asarray(track.found & track.bodies.valid)
+    count = len(valid)
+    if not valid.any():
+        return track.bodies
+    keypoints = np.asarray(track.keypoints_2d, np.float32)
+    sigma = keypoint_noise_px(keypoints)
+    directions, weight = bone_directions(track, lens)
+    start = track.bodies.params
+    focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
+
+    def solve(frames, found, rate, fit_betas, betas=None):
+        """Frames ``frames`` (indices, padded with repeats) fitted as one clip."""
+        pick = jax.tree.map(lambda a: np.asarray(a)[frames], start)
+        if betas is not None:
+            pick = pick.replace(betas=np.broadcast_to(betas, pick.betas.shape).astype(np.float32))
+        return _fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
+                    directions[frames], weight[frames], found, fit_betas=fit_betas, config=config)
+
+    seen = np.flatnonzero(valid)
+    spread = seen[np.unique(np.round(np.linspace(0, len(seen) - 1, min(len(seen), SHAPE_FRAMES))).astype(int))]
+    frames = np.concatenate([spread, np.full(SHAPE_FRAMES - len(spread), spread[-1])])
+    shape = np.asarray(solve(frames, np.arange(SHAPE_FRAMES) < len(spread), 0.0, True).params.betas[0])
+    parts = []
+    for first in range(0, count, WINDOW):
+        span = np.arange(first - MARGIN, first + WINDOW + MARGIN)
+        inside = (span >= 0) & (span < count)
+        frames = np.clip(span, 0, count - 1)
+        result = solve(frames, inside & valid[frames], fps or 0.0, False, shape)
+        core = inside & (span >= first) & (span < first + WINDOW)
+        parts.append(jax.tree.map(lambda a: np.asarray(a)[core], result.params))
+    params = jax.tree.map(lambda *a: np.concatenate(a), *parts)
+    finite = np.all(np.isfinite(np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(params))), (1, 2))
+    scale, trans = _weak_cameras(openpose_keypoint_model(model), params, focal, centre, keypoints[..., 2])
+    return Bodies(params, np.asarray(scale), np.asarray(trans), valid & finite)
