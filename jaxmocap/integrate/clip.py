@@ -17,15 +17,17 @@ squared normalised errors whose balance holds for any video:
 * anatomy: elbows, knees and fingers within their range (`least_squares.BEND_LIMITS`, radians over
   ``limit_sigma_deg``), fingers bending as hinges (``hinge_sigma_deg``), every joint's rotation from rest over
   ``pose_sigma_deg`` (what no observation decides, a bone's twist, stays near rest);
-* motion: the second differences of the 67 keypoints in 3D (root included) times the frame rate squared, in m/s^2
-  over ``acceleration_sigma``; a frame's acceleration is expected within it at any frame rate;
+* motion: the second differences of the 67 keypoints in 3D (root included; a hand's where it is seen) times the
+  frame rate squared, in m/s^2 over ``acceleration_sigma``, and of the body joints' rotations, in rad/s^2 over
+  ``angular_acceleration_sigma`` (a twist the keypoints hardly see turns smoothly too); a frame's acceleration is
+  expected within them at any frame rate;
 * the shape: ``betas`` over one standard deviation of the population (the model's shape space is whitened).
 
 Frames where the person is not ``found`` hold their start and weigh nothing. Solved by `ClipLevenbergMarquardt`
 (an `optimistix` least-squares solver, matrix-free: conjugate gradients on the damped Gauss-Newton system, each
-product one pass over the clip), preconditioned by `preconditioner`'s blocks: each frame's body with its coupling
-to the frames beside it, factored exactly (`banded`), and each finger joint. Work and memory are linear in the
-number of frames. `fit_clip` is pure and differentiable (implicit differentiation of the optimum).
+product one pass over the clip), preconditioned by `preconditioner`'s blocks: each frame's body and each of its
+hands, each with its coupling to the frames beside it, factored exactly (`banded`). Work and memory are linear in
+the number of frames. `fit_clip` is pure and differentiable (implicit differentiation of the optimum).
 """
 
 from __future__ import annotations
@@ -70,7 +72,7 @@ class ClipConfig:
     """Each residual's standard deviation in its unit (module docstring), and the solve's step cap (static)."""
 
     iterations: int = 60  # the cap on Levenberg-Marquardt steps
-    cg_iterations: int = 4  # conjugate-gradient steps for each step's linear system
+    cg_iterations: int = 8  # conjugate-gradient steps for each step's linear system
     cauchy: float = 3.0  # errors beyond this many standard deviations count less and less (Cauchy)
     direction_sigma_deg: float = 15.0  # the 3D landmarks' bone directions
     acceleration_sigma: float = 20.0  # m/s^2: a keypoint's acceleration in one frame
@@ -254,36 +256,39 @@ BODY = 22  # the body's joints (global orientation to wrists), the first of SOLV
 
 class ClipBlocks(NamedTuple):
     """`preconditioner`'s blocks of ``J^T J``: the bodies' (each frame's 22 joints' increments, then its
-    translation) with their coupling over time (block-banded), each frame's hands (each hand's 15 joints'
-    increments), the shape's diagonal (`clip_solver.Preconditioner`)."""
+    translation) and each hand's (its 15 joints' increments), each with its coupling over time (block-banded); the
+    shape's diagonal (`clip_solver.Preconditioner`)."""
 
     body: banded.Banded  # m = 69
-    hands: Float[Array, "T 2 45 45"]
+    hands: tuple[banded.Banded, banded.Banded]  # left, right: m = 45
     betas: Float[Array, "B"]
 
     def diagonal(self) -> Step:
         body = jnp.diagonal(self.body.diagonal, axis1=-2, axis2=-1)
-        hands = jnp.diagonal(self.hands, axis1=-2, axis2=-1).reshape(-1, 30, 3)
-        return Step(jnp.concatenate([body[:, :3 * BODY].reshape(-1, BODY, 3), hands], 1), body[:, 3 * BODY:],
+        hands = [jnp.diagonal(hand.diagonal, axis1=-2, axis2=-1).reshape(-1, 15, 3) for hand in self.hands]
+        return Step(jnp.concatenate([body[:, :3 * BODY].reshape(-1, BODY, 3), *hands], 1), body[:, 3 * BODY:],
                     self.betas)
 
     def damped_inverse(self, shift: Step) -> Callable[[Step], Step]:
-        def body_of(step):
-            return jnp.concatenate([step.pose[:, :BODY].reshape(step.pose.shape[0], -1), step.transl], 1)
-
         frames = shift.pose.shape[0]
-        body = banded.factor(self.body._replace(diagonal=self.body.diagonal + jax.vmap(jnp.diag)(body_of(shift))))
-        hands = self.hands + jax.vmap(jax.vmap(jnp.diag))(shift.pose[:, BODY:].reshape(frames, 2, 45))
-        eye = jnp.eye(45, dtype=hands.dtype)
-        # one matrix at a time (`banded`: jaxlib's batched LAPACK), then applied as a batched product
-        hands = jax.lax.map(lambda a: jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(a, lower=True), eye),
-                            hands.reshape(-1, 45, 45)).reshape(hands.shape)
+
+        def body_of(step):
+            return jnp.concatenate([step.pose[:, :BODY].reshape(frames, -1), step.transl], 1)
+
+        def hand_of(step, h):
+            return step.pose[:, BODY + 15 * h:BODY + 15 * (h + 1)].reshape(frames, 45)
+
+        def factor(blocks, shift_rows):
+            return banded.factor(blocks._replace(diagonal=blocks.diagonal + jax.vmap(jnp.diag)(shift_rows)))
+
+        body = factor(self.body, body_of(shift))
+        hands = [factor(hand, hand_of(shift, h)) for h, hand in enumerate(self.hands)]  # one after the other
         betas = 1.0 / (self.betas + shift.betas)
 
         def apply(v: Step) -> Step:
             solved = banded.solve(body, body_of(v))
-            fingers = jnp.einsum("thab,thb->tha", hands, v.pose[:, BODY:].reshape(frames, 2, 45))
-            pose = jnp.concatenate([solved[:, :3 * BODY].reshape(-1, BODY, 3), fingers.reshape(frames, 30, 3)], 1)
+            fingers = [banded.solve(hand, hand_of(v, h)).reshape(frames, 15, 3) for h, hand in enumerate(hands)]
+            pose = jnp.concatenate([solved[:, :3 * BODY].reshape(frames, BODY, 3), *fingers], 1)
             return Step(pose, solved[:, 3 * BODY:], betas * v.betas)
 
         return apply
@@ -296,7 +301,8 @@ def _inverse3(m: Float[Array, "... 3 3"]) -> Float[Array, "... 3 3"]:
 
 
 def _frame_blocks(km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost):
-    """One frame's `ClipBlocks` rows: ``image`` and ``motion`` (K, 3, 3) each keypoint's metric of its 3D
+    """One frame's diagonal blocks (the body's, each hand's) and its keypoints' Jacobians in the body's and in each
+    hand's increments (what couples the frames): ``image`` and ``motion`` (K, 3, 3) each keypoint's metric of its 3D
     position's change (reprojection through the pinhole, acceleration's diagonal), ``bone_metric`` (N, 3, 3) each
     bone's of the change of its far end relative to its near end (``bones``: the pairs), ``axis_weight`` (55, 3)
     the priors' weights on the axis-angles and ``to_theta`` (55, 3, 3) their change per local increment."""
@@ -312,7 +318,7 @@ def _frame_blocks(km, lin, image, motion, bones, bone_metric, axis_weight, to_th
     dense = (jnp.einsum("kci,kcj->ij", body, metric @ body)
              + jnp.einsum("nci,ncj->ij", across, bone_metric @ across)
              + jax.scipy.linalg.block_diag(*theta[:BODY], lost * jnp.eye(3, dtype=body.dtype)))
-    hands = []
+    hands, parts = [], []
     for h in range(2):  # a hand's joints move its own 21 keypoints and 20 bones alone
         rows = np.arange(25 + 21 * h, 46 + 21 * h)
         part = jnp.moveaxis(jacobian[:, rows, 25 + 15 * h:40 + 15 * h], 0, 1).reshape(21, 3, 45)
@@ -321,16 +327,17 @@ def _frame_blocks(km, lin, image, motion, bones, bone_metric, axis_weight, to_th
         hands.append(jnp.einsum("kci,kcj->ij", part, metric[rows] @ part)
                      + jnp.einsum("nci,ncj->ij", across, bone_metric[ends] @ across)
                      + jax.scipy.linalg.block_diag(*theta[25 + 15 * h:40 + 15 * h]))
-    hands = jnp.stack(hands)
-    return dense, hands, body
+        parts.append(part)
+    return dense, jnp.stack(hands), body, jnp.stack(parts)
 
 
 def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipBlocks:
     """Blocks of ``J^T J`` at ``y`` (`ClipBlocks`): of each frame's body, from the keypoints' reprojection
-    (through the pinhole's Jacobian, at Cauchy's weight), their acceleration (its diagonal coefficients), the bones'
-    directions and the priors, limits and holds; of each frame's hands likewise (their accelerations by the
-    diagonal alone, their coupling to the body left out); the shape's diagonal. Blended skinning is left out
-    (millimetres); any positive definite blocks make the solve converge, these make it fast."""
+    (through the pinhole's Jacobian, at Cauchy's weight), their accelerations, the bones' directions (at Cauchy's
+    weight), the joints' angular accelerations (their turns taken as their increments) and the priors, limits and
+    holds, coupled to the frames beside it by the accelerations; of each hand's fingers likewise (their coupling to
+    the body left out); the shape's diagonal. Blended skinning is left out (millimetres); any positive definite
+    blocks make the solve converge, these make it fast."""
     betas = _shape(y, data)
     km = data.km
     pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
@@ -363,17 +370,22 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     lost = 1.0 - data.found
     axis_weight = bend + jnp.asarray(_prior_sigma_rad(config) ** -2, pose.dtype) + lost[:, None, None]
     bones = tuple(np.asarray(side) for side in zip(*BONES))
-    diagonal, hands, jacobian = jax.vmap(_frame_blocks, in_axes=(None, 0, 0, 0, None, 0, 0, 0, 0))(
+    diagonal, hands, jacobian, hand_jacobians = jax.vmap(_frame_blocks, in_axes=(None, 0, 0, 0, None, 0, 0, 0, 0))(
         km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost)
-    # the accelerations couple each frame's body with the two before and after it (`residuals`' rows, by frame)
+    # the accelerations couple each frame with the two before and after it (`residuals`' rows, by frame)
     coupling = (data.fps**2 / config.acceleration_sigma) ** 2
 
-    def across(by, weight):  # sum_k weight[t, k] J[t + by, k]^T J[t, k] of each frame t, zero past the end
-        frames, m = jacobian.shape[0], jacobian.shape[-1]
-        zero = jnp.zeros((min(by, frames), m, m), jacobian.dtype)
+    def across(by, weight, j=jacobian):  # sum_k weight[t, k] J[t + by, k]^T J[t, k] of each t, zero past the end
+        frames, m = j.shape[0], j.shape[-1]
+        zero = jnp.zeros((min(by, frames), m, m), j.dtype)
         if frames <= by:
             return zero
-        return jnp.concatenate([jnp.einsum("tkci,tk,tkcj->tij", jacobian[by:], weight[:-by], jacobian[:-by]), zero])
+        return jnp.concatenate([jnp.einsum("tkci,tk,tkcj->tij", j[by:], weight[:-by], j[:-by]), zero])
+
+    def hand(h):  # its fingers' blocks, coupled over time by its own keypoints' accelerations
+        j, part = hand_jacobians[:, h], slice(25 + 21 * h, 46 + 21 * h)
+        return banded.Banded(hands[:, h], coupling * across(1, -2 * rows[:, part] - 2 * after[:, part], j),
+                             coupling * across(2, after[:, part], j))
 
     # the joints' angular accelerations likewise, each joint's turn taken as its increment's (exact on the diagonal)
     turning = (data.fps**2 / config.angular_acceleration_sigma) ** 2 * jnp.diag(
@@ -388,7 +400,7 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     far = jnp.zeros_like(image).at[:, bones[1]].add(bone_metric)
     jb = lin.jb.reshape(pose.shape[0], betas.shape[0], 3, -1)  # (T, B, 3, K)
     shape = jnp.einsum("tbck,tkcd,tbdk->b", jb, image + motion + far, jb) + config.betas_sigma**-2
-    return ClipBlocks(body, hands, jnp.where(data.fit_betas > 0, shape, 1.0))
+    return ClipBlocks(body, (hand(0), hand(1)), jnp.where(data.fit_betas > 0, shape, 1.0))
 
 
 def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPLXParams, *,
