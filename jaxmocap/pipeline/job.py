@@ -95,7 +95,7 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     store = ChunkStore(out_dir, chunk_key(config, inputs.model_sha256) | {"version": SETTINGS_VERSION})
     chrono = Chrono()
     chunks = list(solved_chunks(config, inputs, store, out_dir, chrono, observed))
-    with chrono("shape"):
+    with chrono("fit"):  # the whole clip (or the regressors' shape)
         video = inputs.media.kind in ("video", "webcam")
         tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
                                     config.max_people)
