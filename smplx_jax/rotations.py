@@ -87,6 +87,12 @@ def quat_to_rotmat(quat: Float[ArrayLike, "... 4"]) -> Float[Array, "... 3 3"]:
     return jnp.stack(rows, axis=-1).reshape(quat.shape[:-1] + (3, 3))
 
 
+def quat_product(a: Float[ArrayLike, "... 4"], b: Float[ArrayLike, "... 4"]) -> Float[Array, "... 4"]:
+    """Hamilton's product ``a b`` of quaternions (w, x, y, z): the rotation ``b`` then ``a``."""
+    wa, va, wb, vb = a[..., :1], a[..., 1:], b[..., :1], b[..., 1:]
+    return jnp.concatenate([wa * wb - jnp.sum(va * vb, -1, keepdims=True), wa * vb + wb * va + jnp.cross(va, vb)], -1)
+
+
 @jax.jit
 def rotvec_to_quat(rotvec: Float[ArrayLike, "... 3"]) -> Float[Array, "... 4"]:
     """Unit quaternion (w, x, y, z) of an axis-angle vector."""

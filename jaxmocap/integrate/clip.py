@@ -49,7 +49,7 @@ from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.integrate.keypoints import KeypointModel, params_of
 from jaxmocap.integrate.least_squares import BEND_LIMITS, FINGER_JOINTS, bend_of
 from smplx_jax import BodyModel, SMPLXParams
-from smplx_jax.rotations import quat_to_rotvec, rotvec_to_quat
+from smplx_jax.rotations import quat_product, quat_to_rotvec, rotvec_to_quat
 
 SOLVED_JOINTS = tuple(j for j in range(55) if j not in (22, 23, 24))  # all but the jaw and the eyes
 FIXED_JOINTS = (22, 23, 24)
@@ -239,16 +239,9 @@ def _angular_accelerations(rotvecs: Float[Array, "T J 3"]) -> Float[Array, "T J 
     if rotvecs.shape[0] < 3:
         return jnp.zeros_like(rotvecs)
     q = rotvec_to_quat(rotvecs)
-    turns = quat_to_rotvec(_quat_product(q[:-1] * jnp.asarray([1.0, -1.0, -1.0, -1.0], q.dtype), q[1:]))
+    turns = quat_to_rotvec(quat_product(q[:-1] * jnp.asarray([1.0, -1.0, -1.0, -1.0], q.dtype), q[1:]))
     zero = jnp.zeros_like(rotvecs[:1])
     return jnp.concatenate([zero, turns[1:] - turns[:-1], zero])
-
-
-def _quat_product(a: Float[Array, "... 4"], b: Float[Array, "... 4"]) -> Float[Array, "... 4"]:
-    """Hamilton's product of quaternions (w, x, y, z)."""
-    w1, v1, w2, v2 = a[..., :1], a[..., 1:], b[..., :1], b[..., 1:]
-    return jnp.concatenate([w1 * w2 - jnp.sum(v1 * v2, -1, keepdims=True),
-                            w1 * v2 + w2 * v1 + jnp.cross(v1, v2)], -1)
 
 
 BODY = 22  # the body's joints (global orientation to wrists), the first of SOLVED_JOINTS
@@ -460,8 +453,7 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
 def reprojection_errors(y: ClipUnknowns, data: ClipData) -> Float[Array, "T"]:
     """Each frame's mean pixel distance between the keypoints projected and their targets (confidence > 0)."""
     def one(pose, fixed, transl, target, confidence):
-        x = points_3d(data.km, full_pose(pose, fixed), y.betas, transl)
-        pixels = data.focal_length * x[:, :2] / jnp.maximum(x[:, 2:], 1e-3) + data.principal_point
+        pixels = _pixels(points_3d(data.km, full_pose(pose, fixed), y.betas, transl), data)
         seen = confidence > 0
         error = jnp.linalg.norm(pixels - target, axis=-1)
         return jnp.sum(jnp.where(seen, error, 0.0)) / jnp.maximum(jnp.sum(seen), 1)

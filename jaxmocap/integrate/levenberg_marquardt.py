@@ -269,18 +269,12 @@ def updated_secant(secant: Float[Array, "n n"], step: Float[Array, "n"], gradien
     return jnp.where(ok, 0.5 * (new + new.T), secant)
 
 
-def _quat_product(a, b):
-    """``a b`` of quaternions ``(..., 4)`` (w, x, y, z)."""
-    wa, va, wb, vb = a[..., :1], a[..., 1:], b[..., :1], b[..., 1:]
-    return jnp.concatenate([wa * wb - jnp.sum(va * vb, -1, keepdims=True), wa * vb + wb * va + jnp.cross(va, vb)], -1)
-
-
 def retract(y: Unknowns, delta: Unknowns) -> Unknowns:
     """``y`` moved by a step: each rotation by its local increment, ``R_j <- exp(dphi_j) R_j`` (the axis-angle of
     the product nearest ``y``'s, of those that differ by whole turns), shape and camera by addition. The rotations
     compose exactly: a joint turned one way and its child the other stay aligned however large the step."""
     theta = y.pose_rotvecs
-    phi = rotations.quat_to_rotvec(_quat_product(rotations.rotvec_to_quat(delta.pose_rotvecs),
+    phi = rotations.quat_to_rotvec(rotations.quat_product(rotations.rotvec_to_quat(delta.pose_rotvecs),
                                                  rotations.rotvec_to_quat(theta)))
     norm2 = jnp.sum(phi * phi, -1, keepdims=True)
     turn = 2 * jnp.pi * phi / jnp.sqrt(jnp.where(norm2 > 0, norm2, 1.0))
