@@ -10,6 +10,7 @@ import pytest
 
 import smplx_jax
 from jaxmocap.integrate import clip
+from jaxmocap.integrate.clip_solver import Step, cost_of, moved
 from jaxmocap.integrate.fitting import default_pose, openpose_keypoint_model
 from jaxmocap.integrate.keypoints import params_of
 from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
@@ -126,6 +127,42 @@ def test_a_twist_handed_between_the_elbow_and_the_wrist_in_one_frame_is_taken_ba
     fitted_pose = np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(result.params))
     off = _degrees_between(fitted_pose[6, [18, 20]], pose[6, [18, 20]])
     assert np.all(off < 20.0), off
+
+
+def test_reweighted_steps_end_on_the_robust_costs_optimum():
+    """Keypoints with noise at Cauchy's knee (1 px each way at 0.5 px) and a few gross outliers (40 px): the fit
+    steps by errors weighed at each step's start (iteratively reweighted), which must end where the robust cost's
+    own gradient vanishes: its Newton decrement there (the preconditioner's blocks for the Gauss-Newton matrix, as
+    the solver's stopping rule has it) below the rule's tolerance, from thousands of times that at the start."""
+    frames = 12
+    pose, betas, transl, keypoints, directions = synthetic_clip(frames)
+    rng = np.random.default_rng(2)
+    noisy = keypoints.copy()
+    noisy[..., :2] += rng.normal(scale=1.0, size=noisy[..., :2].shape)
+    noisy[rng.integers(0, frames, 6), rng.integers(0, 25, 6), :2] += 40.0
+    start = start_of(pose, transl, 0.02).replace(
+        betas=jnp.broadcast_to(jnp.asarray(betas, jnp.float32), (frames, 10)))
+    result = fitted(noisy, start, directions, fit_betas=False)
+    assert bool(result.converged), int(result.steps)
+    config = clip.ClipConfig()
+    arguments = dict(focal_length=FOCAL, principal_point=CENTRE, fps=FPS, keypoint_sigma_px=np.full((frames, 67), 0.5),
+                     directions=directions, direction_weight=np.ones(directions.shape[:2]), fit_betas=False)
+    _, data = clip.clip_problem(MODEL, noisy, start, **arguments)
+
+    def decrement(params):
+        y = clip.ClipUnknowns(jax.vmap(smplx_jax.SMPLXParams.full_pose)(params)[:, list(clip.SOLVED_JOINTS)],
+                              params.transl, params.betas[0])
+        zero = Step(jnp.zeros_like(y.pose_rotvecs), jnp.zeros_like(y.transl), jnp.zeros_like(y.betas))
+        gradient = jax.grad(lambda s: cost_of(clip.residuals(moved(y, s, False), data, config)))(zero)
+        blocks = clip.preconditioner(y, data, config)  # damped as the solver's first step is
+        inverse = blocks.damped_inverse(jax.tree.map(lambda d: 1e-2 * d, blocks.diagonal())._replace(
+            betas=jnp.ones_like(zero.betas)))
+        return 0.5 * float(sum(jnp.sum(a * b) for a, b in zip(gradient._replace(betas=zero.betas),
+                                                              inverse(gradient._replace(betas=zero.betas)))))
+
+    tolerance = config.tolerance_per_frame * frames
+    at_start, at_end = decrement(start), decrement(result.params)
+    assert at_end < tolerance < at_start / 1000, (at_start, at_end)
 
 
 def params_of_clip(pose, betas, transl):

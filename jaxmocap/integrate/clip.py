@@ -202,17 +202,31 @@ def _motion_rows(data: ClipData) -> Float[Array, "T 67"]:
     return jnp.concatenate([zero, there[:-2] * there[1:-1] * there[2:], zero])
 
 
-def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipResiduals:
-    """Every residual of the clip (module docstring); half their sum of squares is the cost `fit_clip`
-    minimises."""
-    x = _points(y, data)
+def _observed_errors(x: Float[Array, "T 67 3"], data: ClipData, config: ClipConfig):
+    """The keypoints' reprojection errors and the bones' direction errors, each over its standard deviation."""
     error = (_pixels(x, data) - data.target) / data.sigma[..., None]
-    u = jnp.sum(error * error, -1) / config.cauchy**2
-    weight = jnp.sqrt(data.confidence * data.found[:, None])
-    reprojection = weight[..., None] * error * jnp.sqrt(_log1p_ratio(u))[..., None]
     off = (_bones(x)[0] - data.directions) / np.radians(config.direction_sigma_deg)
-    v = jnp.sum(off * off, -1) / config.cauchy**2
-    direction = (jnp.sqrt(data.direction_weight * data.found[:, None]) * jnp.sqrt(_log1p_ratio(v)))[..., None] * off
+    return error, off
+
+
+def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
+              weighed_at: ClipUnknowns | None = None) -> ClipResiduals:
+    """Every residual of the clip (module docstring); half their sum of squares is the cost `fit_clip`
+    minimises. With ``weighed_at``, the robust errors are each scaled by Cauchy's weight at ``weighed_at``
+    instead (``1 / sqrt(1 + u)``, iteratively reweighted least squares): at ``y = weighed_at`` the gradient of
+    half their sum of squares is the cost's, and its Gauss-Newton matrix is the reweighted one (`preconditioner`'s),
+    which models the cost far better than the Jacobian of Cauchy's square root, flat along an outlier's error."""
+    x = _points(y, data)
+    error, off = _observed_errors(x, data, config)
+    if weighed_at is None:
+        u, v = (jnp.sum(e * e, -1) / config.cauchy**2 for e in (error, off))
+        robust = [jnp.sqrt(_log1p_ratio(u)), jnp.sqrt(_log1p_ratio(v))]
+    else:
+        at = _observed_errors(_points(weighed_at, data), data, config)
+        robust = [jax.lax.rsqrt(1.0 + jnp.sum(e * e, -1) / config.cauchy**2) for e in at]
+    weight = jnp.sqrt(data.confidence * data.found[:, None])
+    reprojection = (weight * robust[0])[..., None] * error
+    direction = (jnp.sqrt(data.direction_weight * data.found[:, None]) * robust[1])[..., None] * off
     pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
     limits = jax.nn.relu(jax.vmap(bend_of)(pose)) / np.radians(config.limit_sigma_deg)
     prior = y.pose_rotvecs / _prior_sigma_rad(config)[list(SOLVED_JOINTS)]
@@ -396,6 +410,35 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     return ClipBlocks(body, (hand(0), hand(1)), jnp.where(data.fit_betas > 0, shape, 1.0))
 
 
+def clip_problem(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPLXParams, *,
+                 focal_length: float | Float[ArrayLike, ""], principal_point: Float[ArrayLike, "2"],
+                 fps: float | Float[ArrayLike, ""], keypoint_sigma_px: Float[ArrayLike, "T 67"],
+                 directions: Float[ArrayLike, "T N 3"] | None = None,
+                 direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
+                 fit_betas: bool = True) -> tuple[ClipUnknowns, ClipData]:
+    """The start and the data of `fit_clip`'s problem (its arguments), for `residuals` and `preconditioner`."""
+    dtype = init.global_orient.dtype
+    t = keypoints.shape[0]
+    keypoints = jnp.asarray(keypoints)
+    finite = jnp.all(jnp.isfinite(keypoints), -1)
+    confidence = jnp.where(finite & (keypoints[..., 2] > 0), keypoints[..., 2], 0.0).astype(dtype)
+    target = jnp.where(finite[..., None], keypoints[..., :2], 0.0).astype(dtype)
+    found = (jnp.sum(confidence > 0, -1) > 0) if found is None else jnp.asarray(found)
+    if directions is None:
+        directions = jnp.zeros((t, len(BONES), 3), dtype)
+        direction_weight = jnp.zeros((t, len(BONES)), dtype)
+    pose = jax.vmap(SMPLXParams.full_pose)(init)
+    found_f = found.astype(dtype)
+    betas0 = jnp.sum(found_f[:, None] * init.betas, 0) / jnp.maximum(jnp.sum(found_f), 1.0)
+    start = ClipUnknowns(pose[:, list(SOLVED_JOINTS)], init.transl.astype(dtype), betas0)
+    data = ClipData(openpose_keypoint_model(model), target, confidence, jnp.asarray(keypoint_sigma_px, dtype),
+                    jnp.asarray(directions, dtype), jnp.asarray(direction_weight, dtype), found_f, start,
+                    pose[:, list(FIXED_JOINTS)], jnp.asarray(focal_length, dtype),
+                    jnp.asarray(principal_point, dtype), jnp.asarray(fps, dtype),
+                    jnp.asarray(1.0 if fit_betas else 0.0, dtype))
+    return start, data
+
+
 def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPLXParams, *,
              focal_length: float | Float[ArrayLike, ""], principal_point: Float[ArrayLike, "2"],
              fps: float | Float[ArrayLike, ""],
@@ -416,33 +459,17 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
     it materialises the Jacobian of the optimality condition, fine for short clips;
     ``optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps instead)."""
     config = config or ClipConfig()
-    dtype = init.global_orient.dtype
-    t = keypoints.shape[0]
-    km = openpose_keypoint_model(model)
-    keypoints = jnp.asarray(keypoints)
-    finite = jnp.all(jnp.isfinite(keypoints), -1)
-    confidence = jnp.where(finite & (keypoints[..., 2] > 0), keypoints[..., 2], 0.0).astype(dtype)
-    target = jnp.where(finite[..., None], keypoints[..., :2], 0.0).astype(dtype)
-    found = (jnp.sum(confidence > 0, -1) > 0) if found is None else jnp.asarray(found)
-    if directions is None:
-        directions = jnp.zeros((t, len(BONES), 3), dtype)
-        direction_weight = jnp.zeros((t, len(BONES)), dtype)
-    pose = jax.vmap(SMPLXParams.full_pose)(init)
-    found_f = found.astype(dtype)
-    betas0 = jnp.sum(found_f[:, None] * init.betas, 0) / jnp.maximum(jnp.sum(found_f), 1.0)
-    start = ClipUnknowns(pose[:, list(SOLVED_JOINTS)], init.transl.astype(dtype), betas0)
-    data = ClipData(km, target, confidence, jnp.asarray(keypoint_sigma_px, dtype), jnp.asarray(directions, dtype),
-                    jnp.asarray(direction_weight, dtype), found_f, start, pose[:, list(FIXED_JOINTS)],
-                    jnp.asarray(focal_length, dtype), jnp.asarray(principal_point, dtype), jnp.asarray(fps, dtype),
-                    jnp.asarray(1.0 if fit_betas else 0.0, dtype))
-    solver = ClipLevenbergMarquardt(tolerance=config.tolerance_per_frame * jnp.maximum(jnp.sum(found_f), 1.0),
+    start, data = clip_problem(model, keypoints, init, focal_length=focal_length, principal_point=principal_point,
+                               fps=fps, keypoint_sigma_px=keypoint_sigma_px, directions=directions,
+                               direction_weight=direction_weight, found=found, fit_betas=fit_betas)
+    solver = ClipLevenbergMarquardt(tolerance=config.tolerance_per_frame * jnp.maximum(jnp.sum(data.found), 1.0),
                                     fit_shared=fit_betas, cg_iterations=config.cg_iterations)
-    blocks = jax.tree_util.Partial(preconditioner, config=config)
-    solution = optx.least_squares(jax.tree_util.Partial(residuals, config=config), solver, start, data,
-                                  options=dict(preconditioner=blocks), max_steps=config.iterations, throw=False,
-                                  adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
+    cost = jax.tree_util.Partial(residuals, config=config)
+    options = dict(preconditioner=jax.tree_util.Partial(preconditioner, config=config), reweighted=cost)
+    solution = optx.least_squares(cost, solver, start, data, options=options, max_steps=config.iterations,
+                                  throw=False, adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
     y = solution.value
-    betas = jnp.where(fit_betas, y.betas, betas0)
+    betas = jnp.where(fit_betas, y.betas, start.betas)
     params = jax.vmap(params_of, in_axes=(0, None, None))(
         jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose), betas, model.num_expression)
     params = params.replace(transl=y.transl)

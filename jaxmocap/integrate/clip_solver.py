@@ -1,12 +1,14 @@
 """The solver of `clip`: Levenberg-Marquardt on a time series, matrix-free.
 
 An `optimistix.AbstractLeastSquaresSolver` for unknowns ``(pose_rotvecs (T, J, 3), transl (T, 3), betas (B,))``
-(`clip.ClipUnknowns`). Each step linearises ``fn`` itself (`jax.linearize`, and its transpose), so the gradient
-``J^T r`` is exact and ``J^T J v`` costs one forward and one backward pass over the clip, whatever couples the
-frames; the damped Gauss-Newton system ``(J^T J + mu D) d = -J^T r`` is solved by conjugate gradients,
-preconditioned by blocks of ``J^T J`` that ``options["preconditioner"](y, args)`` gives at each step
-(`Preconditioner`; `clip.preconditioner`), ``D`` their diagonal. Work and memory are
-linear in the number of frames.
+(`clip.ClipUnknowns`). Each step linearises ``fn`` itself (`jax.linearize`, and its transpose), or, where
+``options["reweighted"](y, args, weighed_at=y0)`` is given, those residuals with their robust weights held at the
+step's start (iteratively reweighted least squares: the same gradient, and a Gauss-Newton matrix that models a
+robust cost far better); so the gradient ``J^T r`` is exact and ``J^T J v`` costs one forward and one backward
+pass over the clip, whatever couples the frames. The damped Gauss-Newton system ``(J^T J + mu D) d = -J^T r`` is
+solved by conjugate gradients, preconditioned by blocks of ``J^T J`` that ``options["preconditioner"](y, args)``
+gives at each step (`Preconditioner`; `clip.preconditioner`), ``D`` their diagonal; steps are judged by ``fn``'s
+cost. Work and memory are linear in the number of frames.
 
 Rotations move by local increments, ``R <- exp(dphi) R`` (`levenberg_marquardt.retract`), translations and the
 shape by addition. ``mu`` follows Nielsen's rule; the solve has converged when, at damping at most 1, half the
@@ -100,7 +102,10 @@ class ClipLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
 
     def step(self, fn, y, args, options, state, tags):
         zero = self._zero(y)
-        r, linear = jax.linearize(lambda s: fn(moved(y, s, self.fit_shared), args)[0], zero)
+        reweighted = options.get("reweighted")
+        residual = (lambda s: fn(moved(y, s, self.fit_shared), args)[0]) if reweighted is None else (
+            lambda s: reweighted(moved(y, s, self.fit_shared), args, weighed_at=y))
+        r, linear = jax.linearize(residual, zero)
         transpose = jax.linear_transpose(linear, zero)
 
         def keep_shape(v: Step) -> Step:
