@@ -490,7 +490,8 @@ def test_a_hand_lost_for_a_short_gap_is_interpolated():
 
 def test_left_and_right_exchanged_by_the_detector_are_put_back():
     """Real detections of the sample clip, with arms exchanged in frames 10-19 and legs in 12-25 as a detector
-    does when it loses track of the sides: the repair gives back the detections; it leaves them alone as they are."""
+    does when it loses track of the sides: the repair gives back the detections, at once or in two chunks (the
+    second from the first's last frame); it leaves them alone as they are."""
     from jaxmocap.detect import Detector
     from jaxmocap.frame_source import open_media
     from jaxmocap.pipeline.observe import _ARMS, _LEGS, _swap_sides, observe, repair_side_swaps
@@ -504,9 +505,17 @@ def test_left_and_right_exchanged_by_the_detector_are_put_back():
     for t in range(12, 26):
         _swap_sides(swapped, t, _LEGS)
     assert not np.array_equal(swapped.keypoints, obs.keypoints)
+    first, second = (dataclasses.replace(swapped, **{k: getattr(swapped, k)[part] for k in (
+        "keypoints", "body_world", "hands_world", "hands_conf", "body_box", "hand_boxes", "found")})
+        for part in (slice(0, 15), slice(15, None)))
+    head = repair_side_swaps(first)
+    in_chunks = repair_side_swaps(second, head.keypoints[-1])  # a chunk boundary inside both swaps
     for repaired in (repair_side_swaps(swapped), repair_side_swaps(obs)):
         for key in ("keypoints", "body_world", "hands_world", "hands_conf", "hand_boxes"):
             np.testing.assert_array_equal(getattr(repaired, key), getattr(obs, key), err_msg=key)
+    for key in ("keypoints", "body_world", "hands_world", "hands_conf", "hand_boxes"):
+        np.testing.assert_array_equal(np.concatenate([getattr(head, key), getattr(in_chunks, key)]),
+                                      getattr(obs, key), err_msg=key)
 
 
 def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):

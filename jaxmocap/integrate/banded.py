@@ -39,11 +39,13 @@ class Banded(NamedTuple):
 
 
 class Factor(NamedTuple):
-    """`factor`'s result: ``L`` lower triangular by blocks, ``L L^T = A``."""
+    """`factor`'s result: ``L`` lower triangular by blocks, ``L L^T = A``, and the inverses of its diagonal blocks
+    (so that `solve` multiplies, where triangular solves would each be a LAPACK call)."""
 
     diagonal: Float[Array, "T m m"]  # L[t, t], lower triangular
     first: Float[Array, "T m m"]  # L[t, t - 1] (zero at t = 0)
     second: Float[Array, "T m m"]  # L[t, t - 2] (zero at t < 2)
+    inverse: Float[Array, "T m m"]  # L[t, t]^-1
 
 
 def _shifted(blocks, by: int):
@@ -68,11 +70,11 @@ def factor(a: Banded) -> Factor:
         l2 = _right_solve_t(before2, second)
         l1 = _right_solve_t(before, first - l2 @ before_first.T)
         l0 = jnp.linalg.cholesky(diagonal - l1 @ l1.T - l2 @ l2.T)
-        return (l0, l1, before), (l0, l1, l2)
+        return (l0, l1, before), (l0, l1, l2, solve_triangular(l0, eye, lower=True))
 
-    _, (l0, l1, l2) = jax.lax.scan(row, (eye, jnp.zeros_like(eye), eye),
-                                   (a.diagonal, _shifted(a.first, 1), _shifted(a.second, 2)))
-    return Factor(l0, l1, l2)
+    _, blocks = jax.lax.scan(row, (eye, jnp.zeros_like(eye), eye),
+                             (a.diagonal, _shifted(a.first, 1), _shifted(a.second, 2)))
+    return Factor(*blocks)
 
 
 def solve(f: Factor, g: Float[Array, "T m"]) -> Float[Array, "T m"]:
@@ -81,19 +83,19 @@ def solve(f: Factor, g: Float[Array, "T m"]) -> Float[Array, "T m"]:
 
     def forward(carry, blocks):
         z1, z2 = carry  # z[t-1], z[t-2]
-        l0, l1, l2, gt = blocks
-        z = solve_triangular(l0, gt - l1 @ z1 - l2 @ z2, lower=True)
+        l1, l2, inverse, gt = blocks
+        z = inverse @ (gt - l1 @ z1 - l2 @ z2)
         return (z, z1), z
 
-    _, z = jax.lax.scan(forward, (zero, zero), (f.diagonal, f.first, f.second, g))
+    _, z = jax.lax.scan(forward, (zero, zero), (f.first, f.second, f.inverse, g))
     up1 = jnp.concatenate([f.first[1:], jnp.zeros_like(f.first[:1])])  # L[t+1, t]
     up2 = jnp.concatenate([f.second[2:], jnp.zeros_like(f.second[:2])])  # L[t+2, t]
 
     def backward(carry, blocks):
         x1, x2 = carry  # x[t+1], x[t+2]
-        l0, u1, u2, zt = blocks
-        x = solve_triangular(l0, zt - u1.T @ x1 - u2.T @ x2, lower=True, trans="T")
+        u1, u2, inverse, zt = blocks
+        x = inverse.T @ (zt - u1.T @ x1 - u2.T @ x2)
         return (x, x1), x
 
-    _, x = jax.lax.scan(backward, (zero, zero), (f.diagonal, up1, up2, z), reverse=True)
+    _, x = jax.lax.scan(backward, (zero, zero), (up1, up2, f.inverse, z), reverse=True)
     return x

@@ -1,7 +1,7 @@
 """One person's whole clip as one least-squares problem: every frame's pose and translation, one body shape.
 
     result = fit_clip(model, keypoints, init, focal_length=f, principal_point=c, fps=60.0,
-                      keypoint_sigma_px=sigma, bones=observed_bones)
+                      keypoint_sigma_px=sigma, directions=bone_directions, direction_weight=their_confidence)
 
 Unknowns (`ClipUnknowns`): each frame's rotations of the 52 joints a fit moves (`SOLVED_JOINTS`: all but the jaw
 and the eyes, which no keypoint sees) and the body's translation in the camera frame (metres; a pinhole camera of
@@ -307,35 +307,55 @@ def _inverse3(m: Float[Array, "... 3 3"]) -> Float[Array, "... 3 3"]:
     return jnp.moveaxis(mat3.inverse(columns), -1, 0).reshape(m.shape)
 
 
-def _frame_blocks(km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost):
-    """One frame's diagonal blocks (the body's, each hand's) and its keypoints' Jacobians in the body's and in each
-    hand's increments (what couples the frames): ``image`` and ``motion`` (K, 3, 3) each keypoint's metric of its 3D
-    position's change (reprojection through the pinhole, acceleration's diagonal), ``bone_metric`` (N, 3, 3) each
-    bone's of the change of its far end relative to its near end (``bones``: the pairs), ``axis_weight`` (55, 3)
-    the priors' weights on the axis-angles and ``to_theta`` (55, 3, 3) their change per local increment."""
+# The body joints that move each hand (left, right): the kinematic chain from the pelvis to its wrist. A hand's
+# keypoints and bones depend on these alone of the body's, so their share of the body's block is a 27 x 27 block
+# (these joints' increments and the translation), not 69 x 69.
+ARM_CHAINS = ((0, 3, 6, 9, 13, 16, 18, 20), (0, 3, 6, 9, 14, 17, 19, 21))
+ARM_COLUMNS = tuple(np.concatenate([(3 * np.asarray(chain)[:, None] + np.arange(3)).ravel(), 3 * BODY + np.arange(3)])
+                    for chain in ARM_CHAINS)
+
+
+def _spread(block: Float[Array, "... 27 27"], hand: int) -> Float[Array, "... 69 69"]:
+    """A hand's arm block (`ARM_COLUMNS`) in the body's."""
+    place = jnp.asarray(np.eye(3 * BODY + 3)[ARM_COLUMNS[hand]], block.dtype)  # (27, 69)
+    return jnp.swapaxes(place, 0, 1) @ block @ place
+
+
+def _gram(j: Float[Array, "K 3 m"], metric: Float[Array, "K 3 3"]) -> Float[Array, "m m"]:
+    """``sum_k J_k^T metric_k J_k``."""
+    return jnp.einsum("kci,kcj->ij", j, metric @ j)
+
+
+def _frame_blocks(km, lin, image, motion, bone_metric, axis_weight, to_theta, lost):
+    """One frame's diagonal blocks (the body's, each hand's) and its keypoints' Jacobians in the body's increments
+    (BODY_25's; each hand's in its `ARM_COLUMNS`) and in each hand's (what couples the frames): ``image`` and
+    ``motion`` (K, 3, 3) each keypoint's metric of its 3D position's change (reprojection through the pinhole,
+    acceleration's diagonal), ``bone_metric`` (N, 3, 3) each of `BONES`' of the change of its far end relative to
+    its near end, ``axis_weight`` (55, 3) the priors' weights on the axis-angles and ``to_theta`` (55, 3, 3) their
+    change per local increment."""
     jacobian = keypoint_map.pose_jacobian(km, lin)  # (3, K, 55, 3), in the local increments
     k = jacobian.shape[1]
     body = jnp.concatenate([jnp.moveaxis(jacobian[:, :, :BODY], 0, 1).reshape(k, 3, 3 * BODY),
                             jnp.broadcast_to(jnp.eye(3, dtype=jacobian.dtype), (k, 3, 3))], -1)  # (K, 3, 69)
     metric = image + motion
-
-    a, b = bones
-    across = body[b] - body[a]
     theta = jnp.swapaxes(to_theta, -1, -2) @ (axis_weight[..., None] * to_theta)  # (55, 3, 3)
-    dense = (jnp.einsum("kci,kcj->ij", body, metric @ body)
-             + jnp.einsum("nci,ncj->ij", across, bone_metric @ across)
+    a, b = (np.asarray(side) for side in zip(*BODY_BONES))
+    dense = (_gram(body[:25], metric[:25]) + _gram(body[b] - body[a], bone_metric[:len(BODY_BONES)])
              + jax.scipy.linalg.block_diag(*theta[:BODY], lost * jnp.eye(3, dtype=body.dtype)))
-    hands, parts = [], []
+    hands, parts, arms = [], [], []
+    near, far = (np.asarray(side) for side in zip(*HAND_BONES))
     for h in range(2):  # a hand's joints move its own 21 keypoints and 20 bones alone
         rows = np.arange(25 + 21 * h, 46 + 21 * h)
-        part = jnp.moveaxis(jacobian[:, rows, 25 + 15 * h:40 + 15 * h], 0, 1).reshape(21, 3, 45)
         ends = np.arange(len(BODY_BONES) + 20 * h, len(BODY_BONES) + 20 * h + 20)
-        across = part[np.asarray(HAND_BONES)[:, 1]] - part[np.asarray(HAND_BONES)[:, 0]]
-        hands.append(jnp.einsum("kci,kcj->ij", part, metric[rows] @ part)
-                     + jnp.einsum("nci,ncj->ij", across, bone_metric[ends] @ across)
+        arm = body[rows][..., ARM_COLUMNS[h]]  # (21, 3, 27)
+        block = _gram(arm, metric[rows]) + _gram(arm[far] - arm[near], bone_metric[ends])
+        dense = dense + _spread(block, h)
+        part = jnp.moveaxis(jacobian[:, rows, 25 + 15 * h:40 + 15 * h], 0, 1).reshape(21, 3, 45)
+        hands.append(_gram(part, metric[rows]) + _gram(part[far] - part[near], bone_metric[ends])
                      + jax.scipy.linalg.block_diag(*theta[25 + 15 * h:40 + 15 * h]))
         parts.append(part)
-    return dense, jnp.stack(hands), body, jnp.stack(parts)
+        arms.append(arm)
+    return dense, jnp.stack(hands), body[:25], jnp.stack(arms), jnp.stack(parts)
 
 
 def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipBlocks:
@@ -377,22 +397,30 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     lost = 1.0 - data.found
     axis_weight = bend + jnp.asarray(_prior_sigma_rad(config) ** -2, pose.dtype) + lost[:, None, None]
     bones = tuple(np.asarray(side) for side in zip(*BONES))
-    diagonal, hands, jacobian, hand_jacobians = jax.vmap(_frame_blocks, in_axes=(None, 0, 0, 0, None, 0, 0, 0, 0))(
-        km, lin, image, motion, bones, bone_metric, axis_weight, to_theta, lost)
+    diagonal, hands, jacobian, arm_jacobians, hand_jacobians = jax.vmap(
+        _frame_blocks, in_axes=(None, 0, 0, 0, 0, 0, 0, 0))(km, lin, image, motion, bone_metric, axis_weight,
+                                                            to_theta, lost)
     # the accelerations couple each frame with the two before and after it (`residuals`' rows, by frame)
     coupling = (data.fps**2 / config.acceleration_sigma) ** 2
 
-    def across(by, weight, j=jacobian):  # sum_k weight[t, k] J[t + by, k]^T J[t, k] of each t, zero past the end
+    def across_one(by, weight, j):  # sum_k weight[t, k] J[t + by, k]^T J[t, k] of each t, zero past the end
         frames, m = j.shape[0], j.shape[-1]
         zero = jnp.zeros((min(by, frames), m, m), j.dtype)
         if frames <= by:
             return zero
         return jnp.concatenate([jnp.einsum("tkci,tk,tkcj->tij", j[by:], weight[:-by], j[:-by]), zero])
 
+    def across(by, weight):  # of the body's increments: BODY_25's keypoints, and each hand's through its arm
+        total = across_one(by, weight[:, :25], jacobian)
+        for h in range(len(ARM_COLUMNS)):
+            block = across_one(by, weight[:, 25 + 21 * h:46 + 21 * h], arm_jacobians[:, h])
+            total = total + _spread(block, h)
+        return total
+
     def hand(h):  # its fingers' blocks, coupled over time by its own keypoints' accelerations
         j, part = hand_jacobians[:, h], slice(25 + 21 * h, 46 + 21 * h)
-        return banded.Banded(hands[:, h], coupling * across(1, -2 * rows[:, part] - 2 * after[:, part], j),
-                             coupling * across(2, after[:, part], j))
+        return banded.Banded(hands[:, h], coupling * across_one(1, -2 * rows[:, part] - 2 * after[:, part], j),
+                             coupling * across_one(2, after[:, part], j))
 
     # the joints' angular accelerations likewise, each joint's turn taken as its increment's (exact on the diagonal)
     turning = (data.fps**2 / config.angular_acceleration_sigma) ** 2 * jnp.diag(

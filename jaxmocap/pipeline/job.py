@@ -30,7 +30,7 @@ from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
-from jaxmocap.pipeline.observe import Observations
+from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
 from jaxmocap.pipeline.outputs import write_keypoints, write_outputs
 from jaxmocap.pipeline.records import Bodies, Chunk, Track
 from jaxmocap.pipeline.regress import Regression, regressed_bodies
@@ -48,7 +48,7 @@ from jaxmocap.pipeline.stages import (
 from jaxmocap.pipeline.whole_clip import fitted_track
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
-SETTINGS_VERSION = 8  # of the stored chunks: bump when what a chunk holds changes
+SETTINGS_VERSION = 9  # of the stored chunks: bump when what a chunk holds changes
 
 
 @dataclass(frozen=True)
@@ -150,8 +150,8 @@ def whole_tracks(chunks: list[Chunk], model: smplx_jax.BodyModel) -> dict[int, T
 def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir: Path, chrono: Chrono,
                   observed: Observer | None = None) -> Iterator[Chunk]:
     """Each chunk of frames, from the store if it holds it, else through the per-chunk stages (`solve_chunk`),
-    then stored and its detections written as OpenPose JSON. The detector's tracks and the identities carry on
-    from chunk to chunk (in a video), restored from a stored chunk's."""
+    then stored and its detections written as OpenPose JSON. The detector's tracks, the identities and each
+    person's last repaired keypoints carry on from chunk to chunk (in a video), restored from a stored chunk's."""
     from tqdm import tqdm
 
     still = inputs.media.kind in ("image", "images")
@@ -159,19 +159,20 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
                         max_people=1 if config.keypoints else config.max_people,
                         redetect_every=search_interval(inputs.media.fps), landmarks=inputs.landmarks)
     tracker = None if still else IdentityTracker()
-    done = 0
+    done, tracking = 0, {}
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
         for index, batch in enumerate(frame_batches(inputs.frames, config.chunk_size, chrono)):
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
                 chunk = solve_chunk(config, inputs, detector, tracker, ids, [frame for _, frame in batch], chrono,
-                                    observed)
+                                    observed, _part(tracking, "sides/"))
                 with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its JSON written
                     write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
                 store.save(index, chunk)
             else:
                 _restore(chunk.tracking, detector, tracker)
+            tracking = chunk.tracking
             yield chunk
             done += len(ids)
             bar.update(len(ids))
@@ -179,13 +180,16 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
 
 
 def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
-                ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono, observed: Observer | None = None) -> Chunk:
-    """One chunk through detection, then for each person IK and the fit (or the regressors)."""
+                ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono, observed: Observer | None = None,
+                previous: dict[str, np.ndarray] | None = None) -> Chunk:
+    """One chunk through detection, then for each person IK (or the regressors); ``previous``: each identity's
+    repaired keypoints in the frame before the chunk, by its id as text."""
     with chrono("detect"):
         given = None if inputs.given_keypoints is None else np.stack(
             [inputs.given_keypoints.get(int(i), np.zeros((67, 3))) for i in ids])
         video = inputs.media.kind in ("video", "webcam")
-        people = observations(detector, tracker, frames, inputs.media.fps if video else None, given)
+        people, last = observations(detector, tracker, frames, inputs.media.fps if video else None, given,
+                                    {int(i): k for i, k in (previous or {}).items()})
     tracks = {}
     for person_id, obs in people.items():
         if inputs.regression is None:
@@ -194,13 +198,14 @@ def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: 
             hand_boxes = obs.hand_boxes
         else:
             with chrono("regress"):
-                bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, obs,
+                boxed = fill_hand_gaps(obs, round(HAND_GAP_SECONDS * inputs.media.fps)) if video else obs
+                bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, boxed,
                                                       config.integration)
                 if _clip_fitted(config, inputs):  # the clip fit's start
                     bodies = placed_bodies(inputs.model, bodies.params, obs.keypoints, inputs.lens, bodies.valid)
         tracks[person_id] = Track(obs.keypoints, obs.body_box, hand_boxes, obs.found, obs.body_world,
                                   obs.hands_world, obs.hands_conf, bodies)
-    chunk = Chunk(ids, tracks, _tracking(detector, tracker))
+    chunk = Chunk(ids, tracks, _tracking(detector, tracker) | {f"sides/{i}": k for i, k in last.items()})
     if observed is not None:
         observed(chunk, people)
     return chunk
@@ -212,11 +217,12 @@ def _tracking(detector: Detector, tracker: IdentityTracker | None) -> dict[str, 
     return {f"detector/{k}": v for k, v in detector.state().items()} | identities
 
 
-def _restore(tracking: dict[str, np.ndarray], detector: Detector, tracker: IdentityTracker | None) -> None:
-    def part(prefix):
-        return {k.split("/", 1)[1]: v for k, v in tracking.items() if k.startswith(prefix)}
+def _part(tracking: dict[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
+    return {k.split("/", 1)[1]: v for k, v in tracking.items() if k.startswith(prefix)}
 
-    detector.restore(part("detector/"))
+
+def _restore(tracking: dict[str, np.ndarray], detector: Detector, tracker: IdentityTracker | None) -> None:
+    detector.restore(_part(tracking, "detector/"))
     if tracker is not None:
-        tracker.restore(part("identities/"))
+        tracker.restore(_part(tracking, "identities/"))
 

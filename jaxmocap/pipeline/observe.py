@@ -65,13 +65,9 @@ def _record(arrays: dict[str, np.ndarray], i: int, person: Person) -> None:
             arrays["hand_boxes"][i, side] = box
 
 
-HAND_GAP_SECONDS = 0.25  # a hand lost for at most this long is interpolated
-
-
-def repaired(obs: Observations, fps: float) -> Observations:
-    """Video observations with left and right put back where the detector exchanged them (`repair_side_swaps`)
-    and hands lost for at most ``HAND_GAP_SECONDS`` interpolated (`fill_hand_gaps`)."""
-    return fill_hand_gaps(repair_side_swaps(obs), round(HAND_GAP_SECONDS * fps))
+# A hand lost for at most this long is interpolated (over a person's whole track before the clip fit; in each chunk
+# for the regressors' crops): a blink of motion blur or occlusion, in which a hand moves on as it did.
+HAND_GAP_SECONDS = 0.25
 
 
 def fill_hand_gaps(obs: Observations, max_gap: int) -> Observations:
@@ -118,15 +114,18 @@ def _swap_sides(obs: Observations, t: int, group) -> None:
             hands[t] = hands[t, ::-1].copy()
 
 
-def repair_side_swaps(obs: Observations, ratio: float = 0.5) -> Observations:
+def repair_side_swaps(obs: Observations, previous: np.ndarray | None = None, ratio: float = 0.5) -> Observations:
     """Arms (with hands) or legs whose left and right the detector exchanged, put back, frame after frame: where
     the limbs' 2D keypoints lie, with left and right exchanged, nearer the previous frame's (by ``ratio`` of the
     distance) than as detected, and farther than a tenth of the torso apart. A swap the detector keeps for many
-    frames is repaired in all of them, as each is compared with its repaired predecessor."""
+    frames is repaired in all of them, as each is compared with its repaired predecessor; ``previous`` (67, 3) is the
+    repaired keypoints of the frame before the first (None: the person was not there), so that frames repaired
+    in chunks come out as repaired all at once."""
     obs = dataclasses.replace(obs, **{k: getattr(obs, k).copy() for k in (
         "keypoints", "body_world", "hands_world", "hands_conf", "hand_boxes")})
-    for t in np.flatnonzero(obs.found[1:] & obs.found[:-1]) + 1:
-        now, before = obs.keypoints[t], obs.keypoints[t - 1]
+    there = np.concatenate([[previous is not None], obs.found[:-1]]) & obs.found
+    for t in np.flatnonzero(there):
+        now, before = obs.keypoints[t], obs.keypoints[t - 1] if t > 0 else previous
         torso = np.linalg.norm(now[1, :2] - now[8, :2]) if now[1, 2] > 0 and now[8, 2] > 0 else np.inf
         for group in (_ARMS, _LEGS):
             left, right = (list(side) for side in zip(*group[0]))

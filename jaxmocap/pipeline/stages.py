@@ -21,24 +21,28 @@ from jaxmocap.integrate.fitting import openpose_keypoint_model, params_from_full
 from jaxmocap.integrate.keypoints import keypoints_cm
 from jaxmocap.integrate.motion_arrays import reprojection_errors
 from jaxmocap.integrate.smooth import smooth_camera, smooth_params
-from jaxmocap.pipeline.observe import Observations, observe_people, repaired
+from jaxmocap.pipeline.observe import Observations, observe_people, repair_side_swaps
 from jaxmocap.pipeline.records import Bodies, frames_where
 
 Lens = tuple[float, np.ndarray] | tuple[None, None]  # a pinhole camera's (focal_length, principal_point), or none
 
 
 def observations(detector: Detector, tracker: IdentityTracker | None, frames: list[np.ndarray], fps: float | None,
-                 given_keypoints: np.ndarray | None = None) -> dict[int, Observations]:
+                 given_keypoints: np.ndarray | None = None, previous: dict[int, np.ndarray] | None = None
+                 ) -> tuple[dict[int, Observations], dict[int, np.ndarray]]:
     """Each person in the frames by identity (`observe_people`; the detector and ``tracker`` carry on from the
-    frames before); in a video (``fps`` given) with left and right put back where the detector exchanged them and
-    hands lost for a moment interpolated; ``given_keypoints`` (N, 67, 3) replace the 2D keypoints of the one person
-    tracked as the fit's targets."""
+    frames before); in a video (``fps`` given) with left and right put back where the detector exchanged them
+    (`repair_side_swaps`, from ``previous``: each identity's repaired keypoints (67, 3) in the frame before these);
+    ``given_keypoints`` (N, 67, 3) replace the 2D keypoints of the one person tracked as the fit's targets. Also
+    the repaired keypoints of the last frame by identity (where found there), for the frames after these."""
     people = observe_people(detector, tracker, frames)
     if fps is not None:
-        people = {person_id: repaired(obs, fps) for person_id, obs in people.items()}
+        people = {person_id: repair_side_swaps(obs, (previous or {}).get(person_id))
+                  for person_id, obs in people.items()}
+    last = {person_id: obs.keypoints[-1] for person_id, obs in people.items() if obs.found[-1]}
     if given_keypoints is not None:
         people = {person_id: dataclasses.replace(obs, keypoints=given_keypoints) for person_id, obs in people.items()}
-    return people
+    return people, last
 
 
 def initial_poses(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SMPLXParams:

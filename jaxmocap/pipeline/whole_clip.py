@@ -1,9 +1,11 @@
 """Each person's motion over the whole run as one fit (`jaxmocap.integrate.fit_clip`), in windows placed by frame
 number: what the fit observes of a track (each keypoint's detector noise, the bones' directions from the 3D
-landmarks in the camera's axes), one shape for the person from frames spread over the run, then the poses and
+landmarks in the camera's axes, a hand lost for a moment interpolated), one shape for the person from frames spread over the run, then the poses and
 translations window by window with that shape held. A window's result depends only on the frames it covers, so
 the motion is the same whatever chunks the run was stored in, in time linear in the run's length and memory flat.
 """
+
+import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -15,6 +17,7 @@ from jaxmocap.integrate import ClipConfig, fit_clip
 from jaxmocap.integrate.camera import weak_perspective_least_squares
 from jaxmocap.integrate.clip import BLAZEPOSE_OF_BODY25, BODY_BONES, HAND_BONES, points_3d
 from jaxmocap.integrate.fitting import openpose_keypoint_model
+from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
 from jaxmocap.pipeline.records import Bodies, Track
 from smplx_jax.rotations import rotvec_to_rotmat
 
@@ -119,6 +122,15 @@ def _weak_cameras(km, params, focal_length, principal_point, confidence):
     return jax.vmap(one)(params, confidence)
 
 
+def with_hand_gaps_filled(track: Track, max_gap: int) -> Track:
+    """The track with each hand lost for at most ``max_gap`` frames interpolated (`observe.fill_hand_gaps`), over
+    the whole track: the same whatever chunks it was observed in."""
+    filled = fill_hand_gaps(Observations(track.keypoints_2d, track.body_world, track.hands_world, track.hands_conf,
+                                         track.body_box, track.hand_boxes, track.found), max_gap)
+    return dataclasses.replace(track, keypoints_2d=filled.keypoints, hands_world=filled.hands_world,
+                               hands_conf=filled.hands_conf, hand_boxes=filled.hand_boxes)
+
+
 def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | None,
                  config: ClipConfig = ClipConfig()) -> Bodies:
     """The track's bodies as one fit (module docstring) through the pinhole ``lens``: ``track.bodies`` is each
@@ -128,6 +140,8 @@ def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | No
     count = len(valid)
     if not valid.any():
         return track.bodies
+    if fps:
+        track = with_hand_gaps_filled(track, round(HAND_GAP_SECONDS * fps))
     keypoints = np.asarray(track.keypoints_2d, np.float32)
     sigma = keypoint_noise_px(keypoints)
     directions, weight = bone_directions(track, lens)
