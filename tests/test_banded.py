@@ -16,7 +16,8 @@ def random_banded(rng, frames: int, m: int) -> banded.Banded:
                 if t + i < frames and t + j < frames:
                     dense[(t + i) * m:(t + i + 1) * m, (t + j) * m:(t + j + 1) * m] += rows[t, i].T @ rows[t, j]
     blocks = dense.reshape(frames, m, frames, m)
-    pick = [np.stack([blocks[min(t + k, frames - 1), :, t] * (t + k < frames) for t in range(frames)]) for k in range(3)]
+    pick = [np.stack([blocks[min(t + k, frames - 1), :, t] * (t + k < frames) for t in range(frames)])
+            for k in range(3)]
     return banded.Banded(*(jnp.asarray(p, jnp.float32) for p in pick)), dense
 
 

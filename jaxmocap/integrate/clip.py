@@ -315,9 +315,14 @@ ARM_COLUMNS = tuple(np.concatenate([(3 * np.asarray(chain)[:, None] + np.arange(
                     for chain in ARM_CHAINS)
 
 
+def _place(hand: int, dtype) -> Float[Array, "27 69"]:
+    """Which of the body's increments each of a hand's `ARM_COLUMNS` is (one-hot rows)."""
+    return jnp.asarray(np.eye(3 * BODY + 3)[ARM_COLUMNS[hand]], dtype)
+
+
 def _spread(block: Float[Array, "... 27 27"], hand: int) -> Float[Array, "... 69 69"]:
     """A hand's arm block (`ARM_COLUMNS`) in the body's."""
-    place = jnp.asarray(np.eye(3 * BODY + 3)[ARM_COLUMNS[hand]], block.dtype)  # (27, 69)
+    place = _place(hand, block.dtype)
     return jnp.swapaxes(place, 0, 1) @ block @ place
 
 
@@ -347,7 +352,7 @@ def _frame_blocks(km, lin, image, motion, bone_metric, axis_weight, to_theta, lo
     for h in range(2):  # a hand's joints move its own 21 keypoints and 20 bones alone
         rows = np.arange(25 + 21 * h, 46 + 21 * h)
         ends = np.arange(len(BODY_BONES) + 20 * h, len(BODY_BONES) + 20 * h + 20)
-        arm = body[rows][..., ARM_COLUMNS[h]]  # (21, 3, 27)
+        arm = body[rows] @ jnp.swapaxes(_place(h, body.dtype), 0, 1)  # (21, 3, 27): its arm's columns
         block = _gram(arm, metric[rows]) + _gram(arm[far] - arm[near], bone_metric[ends])
         dense = dense + _spread(block, h)
         part = jnp.moveaxis(jacobian[:, rows, 25 + 15 * h:40 + 15 * h], 0, 1).reshape(21, 3, 45)

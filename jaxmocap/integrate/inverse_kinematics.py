@@ -52,13 +52,13 @@ BODY_IK_JOINTS = tuple(j <= 21 and j not in (20, 21) for j in range(55))  # glob
 LEFT_HAND_IK_JOINTS = tuple(j == 20 or 25 <= j < 40 for j in range(55))
 RIGHT_HAND_IK_JOINTS = tuple(j == 21 or 40 <= j < 55 for j in range(55))
 
-# Priors toward the start (metres per radian): bone twists, and how a rotation splits between a joint and its
-# neighbours, are not seen by joint positions; with weaker body priors (2e-3) IK picked them afresh in every frame
-# of real footage (knees, ankles and feet turning by ~100 degrees between frames 1/60 s apart, 35-55% of
-# joint-frames over 45 degrees); 0.03 keeps them where the start puts them at no cost in 3D accuracy
-# (`bench/accuracy.py`, docs/BENCHMARKS.md). The fingers likewise: without the hinge priors and the range limits
-# the hand landmarks were met by fingers turned by 1-3 radians off their flexion axis, which smoothing then bent
-# backwards; holding the whole thumb instead of its outer joints cost 1.3 mm of body PA-MPJPE on the bundled clip.
+# Priors toward the start, in metres of landmark error per radian of turn: what joint positions do not see (a
+# bone's twist, how a rotation splits between a joint and its neighbours) stays where the start puts it. A radian
+# of such turn weighs as a landmark 3 cm off for the body (BlazePose's world landmarks are centimetres off, so any
+# turn they do see still follows them; weaker, IK picks each unseen twist afresh in every frame, a foot turned by
+# ~100 degrees between frames 1/60 s apart), 0.5 mm for the hand's joints (a hand's landmarks are millimetres
+# apart), 5 cm for a finger off its flexion axis and for the thumb (fingers bend as hinges), 20 cm for a finger
+# past its range (`least_squares.BEND_LIMITS`).
 IKConfig = functools.partial(least_squares.SolverConfig, iterations=20, linear_solver="cg", cg_iterations=30,
                              prior_global=1e-4,
                              prior_body=0.03, prior_hand=5e-4, prior_finger_hinge=0.05, prior_thumb=0.05,

@@ -1,8 +1,9 @@
 """Each person's motion over the whole run as one fit (`jaxmocap.integrate.fit_clip`), in windows placed by frame
 number: what the fit observes of a track (each keypoint's detector noise, the bones' directions from the 3D
-landmarks in the camera's axes, a hand lost for a moment interpolated), one shape for the person from frames spread over the run, then the poses and
-translations window by window with that shape held. A window's result depends only on the frames it covers, so
-the motion is the same whatever chunks the run was stored in, in time linear in the run's length and memory flat.
+landmarks in the camera's axes, a hand lost for a moment interpolated), one shape for the person from frames
+spread over the run, then the poses and translations window by window with that shape held. A window's result
+depends only on the frames it covers, so the motion is the same whatever chunks the run was stored in, in time
+linear in the run's length and memory flat.
 """
 
 import dataclasses
