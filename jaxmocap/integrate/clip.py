@@ -24,10 +24,11 @@ squared normalised errors whose balance holds for any video:
 * the shape: ``betas`` over one standard deviation of the population (the model's shape space is whitened).
 
 Frames where the person is not ``found`` hold their start and weigh nothing. Solved by `ClipLevenbergMarquardt`
-(an `optimistix` least-squares solver, matrix-free: conjugate gradients on the damped Gauss-Newton system, each
-product one pass over the clip), preconditioned by `preconditioner`'s blocks: each frame's body and each of its
-hands, each with its coupling to the frames beside it, factored exactly (`banded`). Work and memory are linear in
-the number of frames. `fit_clip` is pure and differentiable (implicit differentiation of the optimum).
+(an `optimistix` least-squares solver, matrix-free: conjugate gradients on the damped Gauss-Newton system of the
+robust errors reweighted at each step's start, each product one pass over the clip), preconditioned by
+`preconditioner`'s blocks: each frame's body and each of its hands, each with its coupling to the frames beside
+it, factored exactly (`banded`). Work and memory are linear in the number of frames. `fit_clip` is pure and
+differentiable (implicit differentiation of the optimum).
 """
 
 from __future__ import annotations
