@@ -3,8 +3,8 @@ for ``|t - s| > 2``, factored and solved exactly, frame by frame (work linear in
 ``T^3``).
 
 ``A`` is held by its lower blocks (`Banded`): ``diagonal[t] = A[t, t]``, ``first[t] = A[t + 1, t]``,
-``second[t] = A[t + 2, t]`` (rows past the end are ignored). Each frame's step factors or solves one ``m x m``
-block, never a batch of them: jaxlib's batched LAPACK kernels run on XLA's thread pool, and two at once on a
+``second[t] = A[t + 2, t]`` (rows past the end are ignored). Each frame's step factors one ``m x m`` block,
+never a batch of them: jaxlib's batched LAPACK kernels run on XLA's thread pool, and two at once on a
 two-core machine wait on each other for ever. A matrix that is not positive definite gives non-finite values
 (a solver's step is then refused), never an exception.
 """
@@ -39,10 +39,10 @@ class Banded(NamedTuple):
 
 
 class Factor(NamedTuple):
-    """`factor`'s result: ``L`` lower triangular by blocks, ``L L^T = A``, and the inverses of its diagonal blocks
-    (so that `solve` multiplies, where triangular solves would each be a LAPACK call)."""
+    """`factor`'s result: ``L`` lower triangular by blocks, ``L L^T = A``, held by its blocks below the diagonal
+    and the inverses of its diagonal blocks (so that `solve` multiplies, where triangular solves would each be a
+    LAPACK call)."""
 
-    diagonal: Float[Array, "T m m"]  # L[t, t], lower triangular
     first: Float[Array, "T m m"]  # L[t, t - 1] (zero at t = 0)
     second: Float[Array, "T m m"]  # L[t, t - 2] (zero at t < 2)
     inverse: Float[Array, "T m m"]  # L[t, t]^-1
@@ -70,7 +70,7 @@ def factor(a: Banded) -> Factor:
         l2 = _right_solve_t(before2, second)
         l1 = _right_solve_t(before, first - l2 @ before_first.T)
         l0 = jnp.linalg.cholesky(diagonal - l1 @ l1.T - l2 @ l2.T)
-        return (l0, l1, before), (l0, l1, l2, solve_triangular(l0, eye, lower=True))
+        return (l0, l1, before), (l1, l2, solve_triangular(l0, eye, lower=True))
 
     _, blocks = jax.lax.scan(row, (eye, jnp.zeros_like(eye), eye),
                              (a.diagonal, _shifted(a.first, 1), _shifted(a.second, 2)))

@@ -210,6 +210,13 @@ def _observed_errors(x: Float[Array, "T 67 3"], data: ClipData, config: ClipConf
     return error, off
 
 
+def _cauchy_weights(x: Float[Array, "T 67 3"], data: ClipData, config: ClipConfig
+                    ) -> tuple[Float[Array, "T 67"], Float[Array, "T N"]]:
+    """Cauchy's weight ``1 / (1 + u)`` of each keypoint's reprojection and each bone's direction at the points
+    ``x`` (what iteratively reweighted steps and `preconditioner` weigh each error by)."""
+    return tuple(1.0 / (1.0 + jnp.sum(e * e, -1) / config.cauchy**2) for e in _observed_errors(x, data, config))
+
+
 def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
               weighed_at: ClipUnknowns | None = None) -> ClipResiduals:
     """Every residual of the clip (module docstring); half their sum of squares is the cost `fit_clip`
@@ -223,8 +230,7 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
         u, v = (jnp.sum(e * e, -1) / config.cauchy**2 for e in (error, off))
         robust = [jnp.sqrt(_log1p_ratio(u)), jnp.sqrt(_log1p_ratio(v))]
     else:
-        at = _observed_errors(_points(weighed_at, data), data, config)
-        robust = [jax.lax.rsqrt(1.0 + jnp.sum(e * e, -1) / config.cauchy**2) for e in at]
+        robust = [jnp.sqrt(w) for w in _cauchy_weights(_points(weighed_at, data), data, config)]
     weight = jnp.sqrt(data.confidence * data.found[:, None])
     reprojection = (weight * robust[0])[..., None] * error
     direction = (jnp.sqrt(data.direction_weight * data.found[:, None]) * robust[1])[..., None] * off
@@ -377,8 +383,8 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     lin = jax.vmap(lambda p: keypoint_map.in_tangent(keypoint_map.linearize(km, p, betas)))(pose)
     x = jnp.swapaxes(lin.x, 1, 2) + y.transl[:, None]  # (T, 67, 3) camera frame
     z = jnp.maximum(x[..., 2], 1e-3)
-    error = (_pixels(x, data) - data.target) / data.sigma[..., None]
-    irls = data.confidence * data.found[:, None] / (1.0 + jnp.sum(error * error, -1) / config.cauchy**2)
+    keypoint_weight, bone_weight = _cauchy_weights(x, data, config)
+    irls = data.confidence * data.found[:, None] * keypoint_weight
     zero, one = jnp.zeros_like(z), jnp.ones_like(z)
     projection = (data.focal_length / z)[..., None, None] * jnp.stack(
         [jnp.stack([one, zero, -x[..., 0] / z], -1), jnp.stack([zero, one, -x[..., 1] / z], -1)], -2)  # (T,K,2,3)
@@ -391,8 +397,7 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     motion = (coefficient * (data.fps**2 / config.acceleration_sigma) ** 2)[..., None, None] * jnp.broadcast_to(
         eye, image.shape)
     unit, length = _bones(x)
-    off = jnp.sum((unit - data.directions) ** 2, -1) / (np.radians(config.direction_sigma_deg) * config.cauchy) ** 2
-    weight = (data.direction_weight * data.found[:, None] / (1.0 + off)
+    weight = (data.direction_weight * data.found[:, None] * bone_weight
               / (np.radians(config.direction_sigma_deg) * length) ** 2)
     bone_metric = weight[..., None, None] * (eye - unit[..., :, None] * unit[..., None, :])
     # the priors, limits and holds act on the axis-angle, which moves by J_l(theta)^-1 per local increment

@@ -275,7 +275,7 @@ def retract(y: Unknowns, delta: Unknowns) -> Unknowns:
     compose exactly: a joint turned one way and its child the other stay aligned however large the step."""
     theta = y.pose_rotvecs
     phi = rotations.quat_to_rotvec(rotations.quat_product(rotations.rotvec_to_quat(delta.pose_rotvecs),
-                                                 rotations.rotvec_to_quat(theta)))
+                                                         rotations.rotvec_to_quat(theta)))
     norm2 = jnp.sum(phi * phi, -1, keepdims=True)
     turn = 2 * jnp.pi * phi / jnp.sqrt(jnp.where(norm2 > 0, norm2, 1.0))
     candidates = jnp.stack([phi, phi - turn, phi + turn])

@@ -166,7 +166,7 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
                 chunk = solve_chunk(config, inputs, detector, tracker, ids, [frame for _, frame in batch], chrono,
-                                    observed, _part(tracking, "sides/"))
+                                    observed, {int(i): k for i, k in _part(tracking, "sides/").items()})
                 with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its JSON written
                     write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
                 store.save(index, chunk)
@@ -181,15 +181,14 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
 
 def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
                 ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono, observed: Observer | None = None,
-                previous: dict[str, np.ndarray] | None = None) -> Chunk:
+                previous: dict[int, np.ndarray] | None = None) -> Chunk:
     """One chunk through detection, then for each person IK (or the regressors); ``previous``: each identity's
-    repaired keypoints in the frame before the chunk, by its id as text."""
+    repaired keypoints in the frame before the chunk."""
     with chrono("detect"):
         given = None if inputs.given_keypoints is None else np.stack(
             [inputs.given_keypoints.get(int(i), np.zeros((67, 3))) for i in ids])
         video = inputs.media.kind in ("video", "webcam")
-        people, last = observations(detector, tracker, frames, inputs.media.fps if video else None, given,
-                                    {int(i): k for i, k in (previous or {}).items()})
+        people, last = observations(detector, tracker, frames, inputs.media.fps if video else None, given, previous)
     tracks = {}
     for person_id, obs in people.items():
         if inputs.regression is None:
