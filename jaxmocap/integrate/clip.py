@@ -179,17 +179,19 @@ def _bones(x: Float[Array, "... 67 3"]) -> tuple[Float[Array, "... N 3"], Float[
     return bone / length[..., None], length
 
 
-def _shape(y: ClipUnknowns, data: ClipData):
+def shape_of(y: ClipUnknowns, data: ClipData) -> Float[Array, "B"]:
+    """The clip's ``betas``: the unknowns' where the shape is solved for, else the start's."""
     return jnp.where(data.fit_betas > 0, y.betas, data.start.betas)
 
 
-def _points(y: ClipUnknowns, data: ClipData) -> Float[Array, "T 67 3"]:
-    betas = _shape(y, data)
+def keypoints_3d(y: ClipUnknowns, data: ClipData) -> Float[Array, "T 67 3"]:
+    """Every frame's 67 keypoints in the camera frame, metres."""
+    betas = shape_of(y, data)
     return jax.vmap(lambda p, f, t: points_3d(data.km, full_pose(p, f), betas, t))(y.pose_rotvecs, data.fixed_pose,
                                                                                   y.transl)
 
 
-def _motion_rows(data: ClipData) -> Float[Array, "T 67"]:
+def motion_rows(data: ClipData) -> Float[Array, "T 67"]:
     """1 where a keypoint's acceleration is a residual: its part (the body, or its hand: any of the hand's keypoints
     seen) is there in the frame and both its neighbours. Unseen, a hand's fingers hold their start, not the arm's
     swing."""
@@ -224,13 +226,13 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
     instead (``1 / sqrt(1 + u)``, iteratively reweighted least squares): at ``y = weighed_at`` the gradient of
     half their sum of squares is the cost's, and its Gauss-Newton matrix is the reweighted one (`preconditioner`'s),
     which models the cost far better than the Jacobian of Cauchy's square root, flat along an outlier's error."""
-    x = _points(y, data)
+    x = keypoints_3d(y, data)
     error, off = _observed_errors(x, data, config)
     if weighed_at is None:
         u, v = (jnp.sum(e * e, -1) / config.cauchy**2 for e in (error, off))
         robust = [jnp.sqrt(_log1p_ratio(u)), jnp.sqrt(_log1p_ratio(v))]
     else:
-        robust = [jnp.sqrt(w) for w in _cauchy_weights(_points(weighed_at, data), data, config)]
+        robust = [jnp.sqrt(w) for w in _cauchy_weights(keypoints_3d(weighed_at, data), data, config)]
     weight = jnp.sqrt(data.confidence * data.found[:, None])
     reprojection = (weight * robust[0])[..., None] * error
     direction = (jnp.sqrt(data.direction_weight * data.found[:, None]) * robust[1])[..., None] * off
@@ -241,16 +243,23 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
     hold = jnp.concatenate([lost[:, None, None] * (y.pose_rotvecs - data.start.pose_rotvecs),
                             lost[:, None, None] * (y.transl - data.start.transl)[:, None]], 1)
     t = x.shape[0]
-    acceleration = (jnp.concatenate([jnp.zeros_like(x[:1]), x[:-2] - 2 * x[1:-1] + x[2:], jnp.zeros_like(x[:1])])
-                    if t > 2 else jnp.zeros_like(x)) * data.fps**2
-    rows = _motion_rows(data)
-    motion = rows[..., None] * acceleration / config.acceleration_sigma
-    angular = rows[:, :1, None] * _angular_accelerations(y.pose_rotvecs[:, :BODY]) * data.fps**2 / (
-        config.angular_acceleration_sigma)
     shared = jnp.where(data.fit_betas > 0, y.betas / config.betas_sigma, y.betas - data.start.betas)
     frames = jnp.concatenate([reprojection.reshape(t, -1), direction.reshape(t, -1), limits, prior.reshape(t, -1),
                               hold.reshape(t, -1)], 1)
-    return ClipResiduals(frames, jnp.concatenate([motion.reshape(t, -1), angular.reshape(t, -1)], 1), shared)
+    return ClipResiduals(frames, motion_residuals(x, y.pose_rotvecs, motion_rows(data), data.fps, config), shared)
+
+
+def motion_residuals(x: Float[Array, "T 67 3"], pose_rotvecs: Float[Array, "T J 3"], rows: Float[Array, "T 67"],
+                     fps, config: ClipConfig) -> Float[Array, "T M"]:
+    """The motion's residuals (module docstring) of the keypoints ``x`` and the body joints' rotations (the first
+    `BODY` of ``pose_rotvecs``), each frame's where ``rows`` (`motion_rows`) says; zero in the first and last."""
+    t = x.shape[0]
+    acceleration = (jnp.concatenate([jnp.zeros_like(x[:1]), x[:-2] - 2 * x[1:-1] + x[2:], jnp.zeros_like(x[:1])])
+                    if t > 2 else jnp.zeros_like(x)) * fps**2
+    motion = rows[..., None] * acceleration / config.acceleration_sigma
+    angular = rows[:, :1, None] * _angular_accelerations(pose_rotvecs[:, :BODY]) * fps**2 / (
+        config.angular_acceleration_sigma)
+    return jnp.concatenate([motion.reshape(t, -1), angular.reshape(t, -1)], 1)
 
 
 def _angular_accelerations(rotvecs: Float[Array, "T J 3"]) -> Float[Array, "T J 3"]:
@@ -377,7 +386,7 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     holds, coupled to the frames beside it by the accelerations; of each hand's fingers likewise (their coupling to
     the body left out); the shape's diagonal. Blended skinning is left out (millimetres); any positive definite
     blocks make the solve converge, these make it fast."""
-    betas = _shape(y, data)
+    betas = shape_of(y, data)
     km = data.km
     pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
     lin = jax.vmap(lambda p: keypoint_map.in_tangent(keypoint_map.linearize(km, p, betas)))(pose)
@@ -389,7 +398,7 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     projection = (data.focal_length / z)[..., None, None] * jnp.stack(
         [jnp.stack([one, zero, -x[..., 0] / z], -1), jnp.stack([zero, one, -x[..., 1] / z], -1)], -2)  # (T,K,2,3)
     image = (irls / data.sigma**2)[..., None, None] * jnp.swapaxes(projection, -1, -2) @ projection
-    rows = _motion_rows(data)  # (T, K)
+    rows = motion_rows(data)  # (T, K)
     zero = jnp.zeros_like(rows[:1])
     after = jnp.concatenate([rows[1:], zero])  # the next frame's row
     coefficient = after + 4 * rows + jnp.concatenate([zero, rows[:-1]])

@@ -1,9 +1,10 @@
 """Each person's motion over the whole run as one fit (`jaxmocap.integrate.fit_clip`), in windows placed by frame
 number: what the fit observes of a track (each keypoint's detector noise, the bones' directions from the 3D
 landmarks in the camera's axes, a hand lost for a moment interpolated), one shape for the person from frames
-spread over the run, then the poses and translations window by window with that shape held. A window's result
-depends only on the frames it covers, so the motion is the same whatever chunks the run was stored in, in time
-linear in the run's length and memory flat.
+spread over the run, each limb's depth in the start chosen over the whole run (`integrate.clip_start`: its costs
+window by window, the choice over all frames), then the poses and translations window by window with that shape
+held. A window's result depends only on the frames it covers, so the motion is the same whatever chunks the run was
+stored in, in time linear in the run's length and memory flat (but for the choice's costs, about 2 kB a frame).
 """
 
 import dataclasses
@@ -16,7 +17,8 @@ import smplx_jax
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import ClipConfig, fit_clip
 from jaxmocap.integrate.camera import weak_perspective_least_squares
-from jaxmocap.integrate.clip import BLAZEPOSE_OF_BODY25, BODY_BONES, HAND_BONES, points_3d
+from jaxmocap.integrate.clip import BLAZEPOSE_OF_BODY25, BODY_BONES, HAND_BONES, SOLVED_JOINTS, clip_problem, points_3d
+from jaxmocap.integrate.clip_start import LIMBS, best_codes, hypothesis_costs, with_codes
 from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
 from jaxmocap.pipeline.records import Bodies, Track
@@ -112,6 +114,15 @@ def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, dir
                     fit_betas=fit_betas, config=config)
 
 
+@disk_jit(static_argnames=("fit_betas", "config"))
+def _hypotheses(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
+                fit_betas: bool, config: ClipConfig):
+    y, data = clip_problem(model, keypoints, start, focal_length=focal_length, principal_point=principal_point,
+                           fps=fps, keypoint_sigma_px=sigma, directions=directions, direction_weight=weight,
+                           found=found, fit_betas=fit_betas)
+    return hypothesis_costs(y, data, config)
+
+
 @jax.jit
 def _weak_cameras(km, params, focal_length, principal_point, confidence):
     """The weak-perspective camera closest to the pinhole's projection of each frame's keypoints."""
@@ -149,27 +160,39 @@ def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | No
     start = track.bodies.params
     focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
 
-    def solve(frames, found, rate, fit_betas, betas=None):
-        """Frames ``frames`` (indices, padded with repeats) fitted as one clip."""
+    def solve(fit, frames, found, rate, betas=None):
+        """Frames ``frames`` (indices, padded with repeats) as one clip, the shape ``betas`` held (None: fitted):
+        ``fit`` is `_fit` or `_hypotheses`."""
         pick = jax.tree.map(lambda a: np.asarray(a)[frames], start)
         if betas is not None:
             pick = pick.replace(betas=np.broadcast_to(betas, pick.betas.shape).astype(np.float32))
-        return _fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
-                    directions[frames], weight[frames], found, fit_betas=fit_betas, config=config)
+        return fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
+                   directions[frames], weight[frames], found, fit_betas=betas is None, config=config)
+
+    def windows():
+        """Each window's frames (padded at the ends with repeats), where they are in the track, which it keeps."""
+        for first in range(0, count, WINDOW):
+            span = np.arange(first - MARGIN, first + WINDOW + MARGIN)
+            inside = (span >= 0) & (span < count)
+            yield np.clip(span, 0, count - 1), inside, inside & (span >= first) & (span < first + WINDOW)
+
+    def in_windows(fit, betas, keep=lambda result: result):
+        """What ``keep`` takes of ``fit``'s results (frames leading) over the track, window by window."""
+        parts = [jax.tree.map(lambda a: np.asarray(a)[core],
+                              keep(solve(fit, frames, inside & valid[frames], fps or 0.0, betas)))
+                 for frames, inside, core in windows()]
+        return jax.tree.map(lambda *a: np.concatenate(a), *parts)
 
     seen = np.flatnonzero(valid)
     spread = seen[np.unique(np.round(np.linspace(0, len(seen) - 1, min(len(seen), SHAPE_FRAMES))).astype(int))]
     frames = np.concatenate([spread, np.full(SHAPE_FRAMES - len(spread), spread[-1])])
-    shape = np.asarray(solve(frames, np.arange(SHAPE_FRAMES) < len(spread), 0.0, True).params.betas[0])
-    parts = []
-    for first in range(0, count, WINDOW):
-        span = np.arange(first - MARGIN, first + WINDOW + MARGIN)
-        inside = (span >= 0) & (span < count)
-        frames = np.clip(span, 0, count - 1)
-        result = solve(frames, inside & valid[frames], fps or 0.0, False, shape)
-        core = inside & (span >= first) & (span < first + WINDOW)
-        parts.append(jax.tree.map(lambda a: np.asarray(a)[core], result.params))
-    params = jax.tree.map(lambda *a: np.concatenate(a), *parts)
+    shape = np.asarray(solve(_fit, frames, np.arange(SHAPE_FRAMES) < len(spread), 0.0).params.betas[0])
+    if fps:  # each limb's depth chosen over the whole track (`clip_start`)
+        unary, triple, hypotheses = in_windows(_hypotheses, shape)
+        codes = np.stack([best_codes(unary[:, limb], triple[:, limb]) for limb in range(len(LIMBS))], 1)
+        pose = np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(start))[:, list(SOLVED_JOINTS)]
+        start = start.replace(body_pose=np.asarray(with_codes(pose, hypotheses, codes))[:, 1:22])
+    params = in_windows(_fit, shape, lambda result: result.params)
     finite = np.all(np.isfinite(np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(params))), (1, 2))
     scale, trans = _weak_cameras(openpose_keypoint_model(model), params, focal, centre, keypoints[..., 2])
     return Bodies(params, np.asarray(scale), np.asarray(trans), valid & finite)
