@@ -15,7 +15,7 @@ each limb's choice is exact given the rest.
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from jaxmocap.integrate.clip import (
     SOLVED_JOINTS,
@@ -141,9 +141,10 @@ def hypothesis_costs(y: ClipUnknowns, data: ClipData, config: ClipConfig
     return jnp.moveaxis(unary, -1, 0), jnp.moveaxis(motion, -1, 0), turns
 
 
-def best_codes(unary: Float[Array, "T C"], triple: Float[Array, "T C C C"]) -> Int[Array, "T"]:
+def best_codes(unary: Float[ArrayLike, "T C"], triple: Float[ArrayLike, "T C C C"]) -> Int[Array, "T"]:
     """The codes minimising ``sum_t unary[t, c_t] + triple[t, c_t-1, c_t, c_t+1]`` over the whole clip (Viterbi
     on pairs of frames; ``triple`` zero in the first and last frames)."""
+    unary, triple = jnp.asarray(unary), jnp.asarray(triple)
     frames, count = unary.shape
     if frames < 3:
         return jnp.argmin(unary, -1)
@@ -167,14 +168,15 @@ def best_codes(unary: Float[Array, "T C"], triple: Float[Array, "T C C C"]) -> I
     return jnp.concatenate([earlier, jnp.stack(end)])
 
 
-def with_codes(pose_rotvecs: Float[Array, "T 52 3"], hypotheses: Float[Array, "T L C 3 3"],
-               codes: Int[Array, "T L"]) -> Float[Array, "T 52 3"]:
+def with_codes(pose_rotvecs: Float[ArrayLike, "T 52 3"], hypotheses: Float[ArrayLike, "T L C 3 3"],
+               codes: Int[ArrayLike, "T L"]) -> Float[Array, "T 52 3"]:
     """`SOLVED_JOINTS`' rotations with each limb's joints as its code in each frame picks (`hypothesis_costs`'
     hypotheses)."""
+    pose_rotvecs, hypotheses = jnp.asarray(pose_rotvecs), jnp.asarray(hypotheses)
     pick = jax.nn.one_hot(codes, len(CODES), dtype=hypotheses.dtype)  # (T, L, C)
     chosen = jnp.einsum("tlc,tlcjk->tljk", pick, hypotheses)
     for limb, joints in enumerate(LIMBS):
-        pose_rotvecs = jnp.asarray(pose_rotvecs).at[:, list(joints)].set(chosen[:, limb])
+        pose_rotvecs = pose_rotvecs.at[:, list(joints)].set(chosen[:, limb])
     return pose_rotvecs
 
 
