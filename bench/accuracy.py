@@ -222,25 +222,26 @@ def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str =
 
     import smplx_jax
     from jaxmocap.motion import lens, read_motion
-    from jaxmocap.pipeline import Bodies, RunConfig, motion_arrays, run
-    from jaxmocap.pipeline.records import frames_where
+    from jaxmocap.pipeline import RunConfig, motion_arrays, run
+    from jaxmocap.pipeline.records import Track, frames_where
+    from jaxmocap.pipeline.whole_clip import with_start
 
     model = smplx_jax.load_model(smplx_jax.default_model_path())
-    chunks = []  # per chunk: (BlazePose's limbs, the clip fit's start, 2D keypoints)
+    chunks = []  # per chunk: (BlazePose's limbs, the person's track)
 
     def observed(chunk, people):
         count = len(chunk.frame_index)
-        part = (np.full((count, 12, 3), np.nan), Bodies.absent(count, model), np.zeros((count, 67, 3)))
+        part = (np.full((count, 12, 3), np.nan), Track.absent(count, model))
         for person_id in sorted(people, reverse=True):
             obs, track = people[person_id], chunk.people[person_id]
-            mine = (obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], track.bodies, track.keypoints_2d)
-            part = frames_where(obs.found, mine, part)
+            part = frames_where(obs.found, (obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], track), part)
         chunks.append(part)
 
     run(RunConfig(video, end=end, overlay=False, progress=False, landmarks=landmarks), work, observed=observed)
     motion = read_motion(work / "motion.npz")
-    blazepose, start, keypoints = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
-    return Stages(blazepose, motion_arrays(model, start, keypoints, lens(motion)), motion,
+    blazepose, track = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
+    start = with_start(model, track, lens(motion)).bodies
+    return Stages(blazepose, motion_arrays(model, start, track.keypoints_2d, lens(motion)), motion,
                   len(list((work / "people").iterdir())))
 
 

@@ -1,13 +1,14 @@
 """``jaxmocap run``: video (or images, or a webcam) in; whole-body SMPL-X motion, keypoints, overlay and exports out.
 
-`run` reads as its stages (`jaxmocap.pipeline.stages`). The embedded default path (no licensed file): the
-detector's 2D keypoints and 3D landmarks -> IK of body and hands from the landmarks -> the fit to the 2D keypoints
-through a pinhole camera. With FrankMocap's converted weights: body and hand regressors on the detector's boxes ->
-copy-and-paste -> optionally the same fit. ``--mode body`` runs no hand model (the detector without hands, no
-hand IK, no hand regressor): the hands stay flat. Frames go in chunks; each finished chunk is stored, so an
-interrupted run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (each chunk
-stores what the detector and the identities carry on to the next). Then over the whole sequence, for each person:
-temporal smoothing -> ``motion.npz`` -> the outputs. ``--mode hands`` is `hands_job`'s (`entry.run` dispatches).
+`run` reads as its stages (`jaxmocap.pipeline.stages`). The embedded default path (no licensed file): the detector's
+2D keypoints and 3D landmarks -> IK of body and hands from the landmarks -> the fit to the 2D keypoints through a
+pinhole camera. With FrankMocap's converted weights: body and hand regressors on the detector's boxes ->
+copy-and-paste -> optionally the same fit. ``--mode body`` runs no hand model (the detector without hands, no hand
+IK, no hand regressor): the hands stay flat. Frames go in chunks; each finished chunk is stored, so an interrupted
+run resumes where it stopped and ends with the same ``motion.npz`` as an uninterrupted one (each chunk stores what
+the detector and the identities carry on to the next). Then over the whole sequence, for each person: the start (IK,
+in windows placed by frame number), the whole clip as one fit -> ``motion.npz`` -> the outputs. ``--mode hands`` is
+`hands_job`'s (`entry.run` dispatches).
 """
 
 import dataclasses
@@ -37,7 +38,6 @@ from jaxmocap.pipeline.regress import Regression, regressed_bodies
 from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import (
     Lens,
-    initial_bodies,
     lens_of,
     motion_arrays,
     observations,
@@ -45,10 +45,10 @@ from jaxmocap.pipeline.stages import (
     placed_bodies,
     smoothed,
 )
-from jaxmocap.pipeline.whole_clip import fitted_track
+from jaxmocap.pipeline.whole_clip import fitted_track, with_start
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
-SETTINGS_VERSION = 9  # of the stored chunks: bump when what a chunk holds changes
+SETTINGS_VERSION = 10  # of the stored chunks: bump when what a chunk holds changes
 
 
 @dataclass(frozen=True)
@@ -95,10 +95,13 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     store = ChunkStore(out_dir, chunk_key(config, inputs.model_sha256) | {"version": SETTINGS_VERSION})
     chrono = Chrono()
     chunks = list(solved_chunks(config, inputs, store, out_dir, chrono, observed))
+    video = inputs.media.kind in ("video", "webcam")
+    tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
+                                config.max_people)
+    if inputs.regression is None:
+        with chrono("ik"):  # each frame's start, in windows placed by frame number (not by chunk)
+            tracks = {i: with_start(inputs.model, t, inputs.lens) for i, t in tracks.items()}
     with chrono("fit"):  # the whole clip (or the regressors' shape)
-        video = inputs.media.kind in ("video", "webcam")
-        tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
-                                    config.max_people)
         fit = _clip_fitted(config, inputs)
 
         def person_bodies(track):
@@ -182,8 +185,9 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
 def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
                 ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono, observed: Observer | None = None,
                 previous: dict[int, np.ndarray] | None = None) -> Chunk:
-    """One chunk through detection, then for each person IK (or the regressors); ``previous``: each identity's
-    repaired keypoints in the frame before the chunk."""
+    """One chunk through detection, then for each person the regressors (if any: without them the clip fit's start
+    comes over the whole track, `with_start`); ``previous``: each identity's repaired keypoints in the frame
+    before the chunk."""
     with chrono("detect"):
         given = None if inputs.given_keypoints is None else np.stack(
             [inputs.given_keypoints.get(int(i), np.zeros((67, 3))) for i in ids])
@@ -191,10 +195,8 @@ def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: 
         people, last = observations(detector, tracker, frames, inputs.media.fps if video else None, given, previous)
     tracks = {}
     for person_id, obs in people.items():
-        if inputs.regression is None:
-            with chrono("ik"):
-                bodies = initial_bodies(inputs.model, obs, inputs.lens)
-            hand_boxes = obs.hand_boxes
+        if inputs.regression is None:  # the start comes over the whole track (`with_start`)
+            bodies, hand_boxes = Bodies.absent(len(frames), inputs.model), obs.hand_boxes
         else:
             with chrono("regress"):
                 boxed = fill_hand_gaps(obs, round(HAND_GAP_SECONDS * inputs.media.fps)) if video else obs

@@ -1,10 +1,10 @@
-"""The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector, each person by identity) ->
-for each person `initial_bodies` (IK from the 3D landmarks, placed in the camera). Over the whole sequence, for
-each person (split tracks joined: `merge_tracks`): `whole_clip.fitted_track` (one fit of the person's whole clip:
-the 2D keypoints, the 3D landmarks, anatomy, motion, one shape) -> `motion_arrays` (what ``motion.npz`` holds);
-then the outputs (`outputs`). With FrankMocap's weights the regressors (`regress.regressed_bodies`) give each
-frame's start instead (`placed_bodies`); with ``--integration copy-paste`` or ``eft`` their bodies are the motion
-as they are: `one_shape` (their median shape) -> `smoothed`."""
+"""The stages of ``jaxmocap run``. Per chunk of frames: `observations` (the detector, each person by identity). Over the
+whole sequence, for each person (split tracks joined: `merge_tracks`): `initial_bodies` (IK from the 3D landmarks,
+placed in the camera; in windows placed by frame number, `whole_clip.with_start`) -> `whole_clip.fitted_track` (one
+fit of the person's whole clip: the 2D keypoints, the 3D landmarks, anatomy, motion, one shape) -> `motion_arrays`
+(what ``motion.npz`` holds); then the outputs (`outputs`). With FrankMocap's weights the regressors
+(`regress.regressed_bodies`) give each frame's start instead (`placed_bodies`); with ``--integration copy-paste`` or
+``eft`` their bodies are the motion as they are: `one_shape` (their median shape) -> `smoothed`."""
 
 import dataclasses
 

@@ -22,6 +22,7 @@ from jaxmocap.integrate.clip_start import LIMBS, best_codes, hypothesis_costs, w
 from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
 from jaxmocap.pipeline.records import Bodies, Track
+from jaxmocap.pipeline.stages import initial_bodies
 from smplx_jax.rotations import rotvec_to_rotmat
 
 # The landmark models' 2D noise, a share of the extent of what they crop: a few pixels of their 256- or 224-pixel
@@ -134,11 +135,31 @@ def _weak_cameras(km, params, focal_length, principal_point, confidence):
     return jax.vmap(one)(params, confidence)
 
 
+def _observations(track: Track) -> Observations:
+    return Observations(track.keypoints_2d, track.body_world, track.hands_world, track.hands_conf, track.body_box,
+                        track.hand_boxes, track.found)
+
+
+def with_start(model: smplx_jax.BodyModel, track: Track, lens) -> Track:
+    """The track with each frame's start for the clip fit (`stages.initial_bodies`: IK from its 3D landmarks,
+    placed in the pinhole ``lens``), solved in windows of `WINDOW` frames placed by frame number (the last padded
+    with its last frame): a batched solve's rounding depends on what shares its batch, and the clip fit's flat
+    directions (depth, twists) carry such differences far, so the start must not depend on the chunks the run was
+    observed in."""
+    count = len(track.found)
+    parts = []
+    for first in range(0, count, WINDOW):
+        frames = np.minimum(np.arange(first, first + WINDOW), count - 1)
+        window = _observations(jax.tree.map(lambda a: np.asarray(a)[frames], track))
+        kept = min(WINDOW, count - first)
+        parts.append(jax.tree.map(lambda a: np.asarray(a)[:kept], initial_bodies(model, window, lens)))
+    return dataclasses.replace(track, bodies=Bodies.concatenate(parts))
+
+
 def with_hand_gaps_filled(track: Track, max_gap: int) -> Track:
     """The track with each hand lost for at most ``max_gap`` frames interpolated (`observe.fill_hand_gaps`), over
     the whole track: the same whatever chunks it was observed in."""
-    filled = fill_hand_gaps(Observations(track.keypoints_2d, track.body_world, track.hands_world, track.hands_conf,
-                                         track.body_box, track.hand_boxes, track.found), max_gap)
+    filled = fill_hand_gaps(_observations(track), max_gap)
     return dataclasses.replace(track, keypoints_2d=filled.keypoints, hands_world=filled.hands_world,
                                hands_conf=filled.hands_conf, hand_boxes=filled.hand_boxes)
 
