@@ -152,6 +152,9 @@ def with_start(model: smplx_jax.BodyModel, track: Track, lens) -> Track:
         frames = np.minimum(np.arange(first, first + WINDOW), count - 1)
         window = _observations(jax.tree.map(lambda a: np.asarray(a)[frames], track))
         kept = min(WINDOW, count - first)
+        if not window.found.any():  # (a person of a long run absent for a while)
+            parts.append(Bodies.absent(kept, model))
+            continue
         parts.append(jax.tree.map(lambda a: np.asarray(a)[:kept], initial_bodies(model, window, lens)))
     return dataclasses.replace(track, bodies=Bodies.concatenate(parts))
 
