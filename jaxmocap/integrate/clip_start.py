@@ -9,7 +9,7 @@ each limb's choice is exact given the rest.
 
     y = chosen_start(y, data, config)  # one clip (`clip.clip_problem`'s start and data), or in its steps:
     unary, triple, hypotheses = hypothesis_costs(y, data, config)  # frame by frame: windows of a long clip
-    codes = jax.vmap(best_codes, in_axes=1, out_axes=1)(unary, triple)  # (T, limbs), over the whole clip
+    codes = limb_codes(unary, triple)  # (T, limbs), over the whole clip
     y = y._replace(pose_rotvecs=with_codes(y.pose_rotvecs, hypotheses, codes))
 """
 
@@ -168,6 +168,11 @@ def best_codes(unary: Float[ArrayLike, "T C"], triple: Float[ArrayLike, "T C C C
     return jnp.concatenate([earlier, jnp.stack(end)])
 
 
+def limb_codes(unary: Float[ArrayLike, "T L C"], triple: Float[ArrayLike, "T L C C C"]) -> Int[Array, "T L"]:
+    """`best_codes` of each limb."""
+    return jax.vmap(best_codes, in_axes=1, out_axes=1)(unary, triple)
+
+
 def with_codes(pose_rotvecs: Float[ArrayLike, "T 52 3"], hypotheses: Float[ArrayLike, "T L C 3 3"],
                codes: Int[ArrayLike, "T L"]) -> Float[Array, "T 52 3"]:
     """`SOLVED_JOINTS`' rotations with each limb's joints as its code in each frame picks (`hypothesis_costs`'
@@ -183,6 +188,6 @@ def with_codes(pose_rotvecs: Float[ArrayLike, "T 52 3"], hypotheses: Float[Array
 def chosen_start(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipUnknowns:
     """The start ``y`` of one clip with each limb's hypotheses chosen over the whole clip (module docstring)."""
     unary, triple, hypotheses = hypothesis_costs(y, data, config)
-    codes = jax.vmap(best_codes, in_axes=(1, 1), out_axes=1)(unary, triple)
+    codes = limb_codes(unary, triple)
     return y._replace(pose_rotvecs=with_codes(y.pose_rotvecs, hypotheses, codes))
 

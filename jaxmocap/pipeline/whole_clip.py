@@ -18,7 +18,7 @@ from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import ClipConfig, fit_clip
 from jaxmocap.integrate.camera import weak_perspective_least_squares
 from jaxmocap.integrate.clip import BLAZEPOSE_OF_BODY25, BODY_BONES, HAND_BONES, SOLVED_JOINTS, clip_problem, points_3d
-from jaxmocap.integrate.clip_start import best_codes, hypothesis_costs, with_codes
+from jaxmocap.integrate.clip_start import hypothesis_costs, limb_codes, with_codes
 from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
 from jaxmocap.pipeline.records import Bodies, Track
@@ -124,7 +124,7 @@ def _hypotheses(model, keypoints, start, focal_length, principal_point, fps, sig
     return hypothesis_costs(y, data, config)
 
 
-_best_codes = jax.jit(jax.vmap(best_codes, in_axes=1, out_axes=1))  # each limb's, at once: (T, L)
+_limb_codes = jax.jit(limb_codes)
 
 
 @jax.jit
@@ -216,7 +216,7 @@ def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | No
     shape = np.asarray(solve(_fit, frames, np.arange(SHAPE_FRAMES) < len(spread), 0.0).params.betas[0])
     if fps:  # each limb's depth chosen over the whole track (`clip_start`)
         unary, triple, hypotheses = in_windows(_hypotheses, shape)
-        codes = _best_codes(unary, triple)
+        codes = _limb_codes(unary, triple)
         pose = np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(start))[:, list(SOLVED_JOINTS)]
         start = start.replace(body_pose=np.asarray(with_codes(pose, hypotheses, codes))[:, 1:22])
     params = in_windows(_fit, shape, lambda result: result.params)
