@@ -6,7 +6,7 @@ threads: the ``smplx`` package + ``torch.optim.LBFGS`` (strong Wolfe line search
 (The comparison with the hand-written Levenberg-Marquardt that the optimistix fit replaced is in docs/BENCHMARKS.md,
 measured by this script at commit 990c816.)
 
-    python bench/fit.py [--out bench/results] [--quick]      (or: jaxmocap bench --only fit)
+    python bench/fit.py [--out bench/results] [--quick] [--parts frames clip]      (or: jaxmocap bench --only fit)
 
 Data: synthetic frames with known answers (random plausible whole-body poses, both hands, 2 px noise, 15% of
 keypoints dropped, a start perturbed from the truth: `jaxmocap.integrate.synthetic`), default body model.
@@ -14,6 +14,12 @@ The objective is the fit's: Cauchy-robust confidence-weighted reprojection of th
 same priors (pose near the start, shape L2, elbow/knee bending limits). For PyTorch the camera is parametrised as
 ``scale0 * exp(a)`` and ``trans0 + scale0 * b`` and the cost divided by ``scale0^2`` so that all unknowns are
 O(1). The camera start is the same for both (fitted to the start pose's keypoints). --quick: PyTorch at 256 only.
+
+``--parts clip``: ``jaxmocap fit``'s clip fit (`fit_folder.fitted_keypoints`: one shape, the motion, windows) on a
+synthetic clip of 256 and 1024 frames (`synthetic.make_clip`: 2 px noise, 15% of keypoints dropped, a pinhole
+camera) from the start the keypoints give (`keypoint_start.facing_pose`), against the per-frame fit it replaced
+(`fitting.fit` at its defaults, same start, same camera): frames/s once compiled, the share of frames converged,
+the median reprojection error and the body keypoints' error in 3D after a similarity per frame (PA, mm).
 """
 
 import argparse
@@ -133,7 +139,100 @@ def main():
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--frames", type=int, nargs="*", default=[256, 1024])
+    parser.add_argument("--parts", nargs="+", choices=("frames", "clip"), default=["frames", "clip"])
     args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    if "clip" in args.parts:
+        clip_benchmark(args.frames, args.out, 1 if args.quick else 2)
+    if "frames" in args.parts:
+        frames_benchmark(args)
+
+
+def clip_benchmark(sizes: list[int], out: Path, repeats: int) -> None:
+    """``--parts clip`` (module docstring): prints a table and writes ``out/fit_clip.json``."""
+    import smplx_jax
+    from jaxmocap.integrate import fitting, synthetic
+    from jaxmocap.integrate.clip import points_3d
+    from jaxmocap.pipeline.fit_folder import facing_params, fitted_keypoints
+
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    km = fitting.openpose_keypoint_model(model)
+    focal, centre = 1500.0, np.asarray([960.0, 540.0], np.float32)
+    body = jax.jit(jax.vmap(lambda pose, betas: points_3d(km, pose, betas, jnp.zeros(3))[:25]))
+
+    def pa_mm(params, clip):
+        """Median over frames of the body keypoints' mean error after a similarity, mm."""
+        ours = np.asarray(body(fitting.full_pose_of(params), params.betas), np.float64)
+        truth = np.asarray(body(jnp.asarray(clip.pose, jnp.float32), jnp.broadcast_to(
+            jnp.asarray(clip.betas, jnp.float32), (len(clip.pose), model.num_betas))), np.float64)
+        errors = []
+        for a, b in zip(ours - ours.mean(1, keepdims=True), truth - truth.mean(1, keepdims=True)):
+            u, s, vt = np.linalg.svd(a.T @ b)
+            flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+            errors.append(np.linalg.norm(np.sum(s * np.diag(flip)) / np.sum(a * a) * a @ (u @ flip @ vt) - b,
+                                         axis=-1).mean())
+        return 1000 * float(np.median(errors))
+
+    def timed(run):
+        begin = time.perf_counter()
+        result = run()
+        first = time.perf_counter() - begin
+        best = first
+        for _ in range(repeats):
+            begin = time.perf_counter()
+            result = run()
+            best = min(best, time.perf_counter() - begin)
+        return result, first, best
+
+    rows = []
+    for frames in sizes:
+        clip = synthetic.make_clip(model, frames, seed=frames, focal_length=focal, principal_point=centre)
+        rng = np.random.default_rng(frames)
+        keypoints = clip.keypoints.copy()
+        keypoints[..., :2] += rng.normal(scale=2.0, size=keypoints[..., :2].shape)
+        keypoints[rng.uniform(size=keypoints.shape[:2]) < 0.15] = 0.0
+        keypoints = keypoints.astype(np.float32)
+        fitted, first, best = timed(lambda: jax.block_until_ready(
+            fitted_keypoints(model, keypoints, (focal, centre), 30.0)))
+        row = dict(frames=frames, clip_fps=frames / best, clip_first_call_seconds=first,
+                   clip_converged=float(np.mean(fitted.converged)),
+                   clip_error_px=float(np.median(np.asarray(fitting_errors(model, fitted.bodies, keypoints,
+                                                                           (focal, centre))))),
+                   clip_pa_mm=pa_mm(fitted.bodies.params, clip))
+        start = facing_params(model, keypoints)
+        per_frame, first, best = timed(lambda: jax.block_until_ready(fitting.fit(
+            model, keypoints, start, focal_length=focal, principal_point=centre)))
+        row.update(frame_fps=frames / best, frame_first_call_seconds=first,
+                   frame_converged=float(np.mean(per_frame.converged)),
+                   frame_error_px=float(np.median(np.asarray(per_frame.reprojection_error_px))),
+                   frame_pa_mm=pa_mm(per_frame.params, clip))
+        row["speedup"] = row["clip_fps"] / row["frame_fps"]
+        rows.append(row)
+        print(row, flush=True)
+    print(f"\njaxmocap fit: the clip fit against the per-frame fit (defaults), {os.cpu_count()} threads, "
+          f"{platform.processor() or platform.machine()}, {jax.devices()[0].platform}, jax {jax.__version__}")
+    print(f"{'frames':>6} {'clip fps':>9} {'converged':>10} {'px':>6} {'PA mm':>6} {'frame fps':>10} "
+          f"{'converged':>10} {'px':>6} {'PA mm':>6} {'ratio':>6}")
+    for r in rows:
+        print(f"{r['frames']:>6} {r['clip_fps']:>9.1f} {100 * r['clip_converged']:>9.0f}% {r['clip_error_px']:>6.2f} "
+              f"{r['clip_pa_mm']:>6.1f} {r['frame_fps']:>10.1f} {100 * r['frame_converged']:>9.0f}% "
+              f"{r['frame_error_px']:>6.2f} {r['frame_pa_mm']:>6.1f} {r['speedup']:>5.1f}x")
+    result = dict(benchmark="fit_clip", threads=os.cpu_count(), machine=platform.machine(), jax=jax.__version__,
+                  devices=[str(d) for d in jax.devices()], rows=rows)
+    (out / "fit_clip.json").write_text(json.dumps(result, indent=2))
+    print(f"wrote {out / 'fit_clip.json'}")
+
+
+def fitting_errors(model, bodies, keypoints, lens):
+    """Each valid frame's reprojection error of ``bodies`` through the pinhole ``lens``, pixels."""
+    from jaxmocap.integrate import reprojection_errors
+
+    errors = reprojection_errors(model, bodies.params, bodies.camera_scale, bodies.camera_trans, keypoints, *lens)
+    return np.asarray(errors)[bodies.valid]
+
+
+def frames_benchmark(args) -> None:
+    """The per-frame fit against PyTorch (module docstring)."""
 
     import torch
 
@@ -184,7 +283,6 @@ def main():
                  f"{fitting.ITERATIONS}), float32, {threads} threads, "
                  f"{platform.processor() or platform.machine()}, jax {jax.__version__}, torch {torch.__version__}; "
                  "median final reprojection error in px")
-    args.out.mkdir(parents=True, exist_ok=True)
     result = dict(benchmark="fit", threads=threads, machine=platform.machine(), jax=jax.__version__,
                   torch=torch.__version__, devices=[str(d) for d in jax.devices()],
                   settings={name: vars(setting) for name, setting in settings.items()}, rows=rows)

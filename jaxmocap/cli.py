@@ -141,8 +141,8 @@ def _cmd_fit(args):
     from jaxmocap.pipeline.fit_folder import fit_keypoint_folder
 
     path = fit_keypoint_folder(args.keypoints, args.out, model_path=args.model, iterations=args.iterations,
-                               init=args.init, smooth=args.smooth, image_size=args.image_size, fps=args.fps,
-                               progress=not args.quiet)
+                               init=args.init, smooth=not args.no_smooth, image_size=args.image_size,
+                               focal_length=args.focal_length, fps=args.fps, progress=not args.quiet)
     print(f"wrote {path}")
 
 
@@ -288,13 +288,17 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")
     p.add_argument("--iterations", type=int, default=None,
-                   help="the cap on Levenberg-Marquardt steps; each frame stops once converged (default: the fit's "
-                        "own, jaxmocap.integrate.fitting.ITERATIONS)")
+                   help="the cap on each window's Levenberg-Marquardt steps; a window stops once converged "
+                        "(default: the clip fit's own, jaxmocap.integrate.ClipConfig.iterations)")
     p.add_argument("--init", type=Path, default=None, help="motion.npz to start from (same frames)")
-    p.add_argument("--smooth", action="store_true", help="temporal smoothing, kernel [0.1, 0.2, 0.5, 0.2, 0.1]")
+    p.add_argument("--no-smooth", action="store_true",
+                   help="the files are unrelated images, not a video's frames: no motion between them")
     p.add_argument("--image-size", type=int, nargs=2, metavar=("W", "H"), default=None,
                    help="image size in pixels (OpenPose JSON has none; default: inferred from the keypoints)")
-    p.add_argument("--fps", type=float, default=30.0, help="frame rate stored in motion.npz (default: %(default)s)")
+    p.add_argument("--focal-length", type=float, default=None, metavar="PX",
+                   help="the camera's focal length in pixels (default: 0.75 x the long side)")
+    p.add_argument("--fps", type=float, default=30.0,
+                   help="the frames' rate: the motion's time step, stored in motion.npz (default: %(default)s)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_fit)
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import smplx_jax
-from jaxmocap.integrate import clip
+from jaxmocap.integrate import clip, synthetic
 from jaxmocap.integrate.clip_solver import Step, cost_of, moved
-from jaxmocap.integrate.fitting import default_pose, openpose_keypoint_model
+from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.integrate.keypoints import params_of
 from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
@@ -19,29 +19,9 @@ FOCAL, CENTRE, FPS = 1500.0, np.array([960.0, 540.0]), 30.0
 MODEL = smplx_jax.load_model(smplx_jax.default_model_path())
 
 
-def synthetic_clip(frames: int, seed: int = 0):
-    """A body swinging its joints smoothly about the fit's default pose, within their range (knees and elbows
-    bent, flat hands), turning and walking away from the camera: its poses (T, 55, 3), shape, translations,
-    keypoints (T, 67, 3) and bone directions (T, N, 3)."""
-    rng = np.random.default_rng(seed)
-    seconds = np.arange(frames) / FPS
-    base, amplitude = np.asarray(default_pose(), np.float64), np.zeros((55, 3))
-    amplitude[1:22] = rng.normal(scale=0.2, size=(21, 3))
-    amplitude[0, 1] = 0.3
-    base[[4, 5], 0], base[18, 1], base[19, 1] = 0.6, -0.8, 0.8  # knees, elbows
-    amplitude[[4, 5, 18, 19]] = 0.0
-    amplitude[[4, 5], 0], amplitude[18, 1], amplitude[19, 1] = 0.3, 0.3, -0.3
-    pose = base[None] + amplitude[None] * np.sin(2 * np.pi * 0.7 * seconds)[:, None, None]
-    betas = rng.normal(scale=0.3, size=MODEL.num_betas)
-    transl = np.stack([0.1 * np.sin(seconds), 0.05 * seconds, 3.0 + 0.5 * seconds], 1)
-    km = openpose_keypoint_model(MODEL)
-    x = np.asarray(jax.vmap(lambda p, t: clip.points_3d(km, p, jnp.asarray(betas, jnp.float32), t))(
-        jnp.asarray(pose, jnp.float32), jnp.asarray(transl, jnp.float32)), np.float64)
-    pixels = FOCAL * x[..., :2] / x[..., 2:] + CENTRE
-    keypoints = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], -1)
-    a, b = (np.asarray(side) for side in zip(*clip.BONES))
-    directions = x[:, b] - x[:, a]
-    return pose, betas, transl, keypoints, directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+def synthetic_clip(frames: int, seed: int = 0) -> synthetic.SyntheticClip:
+    """`synthetic.make_clip` through this module's camera: poses, shape, translations, keypoints, directions."""
+    return synthetic.make_clip(MODEL, frames, seed, FOCAL, CENTRE, FPS)
 
 
 def start_of(pose, transl, noise: float, seed: int = 1):

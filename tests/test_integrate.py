@@ -10,14 +10,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import smplx
-import torch
 
 import smplx_jax
 from conftest import jit_fast_compile, load
 from jaxmocap.batching import bucket_size
 from jaxmocap.cli import main
-from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.integrate import (
     copy_paste,
     fit,
@@ -29,7 +26,6 @@ from jaxmocap.integrate import (
     smooth_rotvecs,
     synthetic,
 )
-from jaxmocap.motion import motion_params, read_motion
 from jaxmocap.pipeline.fit_folder import infer_image_size
 from params_util import random_params
 from smplx_jax import constants, rotations
@@ -317,52 +313,6 @@ def test_smoothing_keeps_constant_motion_and_reduces_jitter(model):
 
 
 # ---- motion.npz and the command line ------------------------------------------------------------------------
-
-def test_fit_command_writes_a_motion_file_that_smplx_reproduces(model, noisy, default_model_dir, tmp_path):
-    kp_dir = tmp_path / "keypoints"
-    kp_dir.mkdir()
-    for i in range(T):
-        people = noisy.keypoints[i:i + 1] if i != 5 else np.zeros((0, 67, 3))
-        write_openpose_json(kp_dir / json_name("clip", i), people)
-    assert main(["fit", str(kp_dir), "--out", str(tmp_path / "first"), "--quiet"]) == 0
-    with np.load(tmp_path / "first" / "motion.npz") as first:  # from the default start, keypoints alone
-        assert np.median(first["reprojection_error_px"][first["valid"]]) < 2.5
-    # from that motion, smoothed (the synthetic frames are unrelated poses, so smoothing moves them a lot)
-    assert main(["fit", str(kp_dir), "--out", str(tmp_path / "out"), "--quiet", "--smooth", "--init",
-                 str(tmp_path / "first" / "motion.npz"), "--image-size", "1000", "1000", "--fps", "25"]) == 0
-    path = tmp_path / "out" / "motion.npz"
-    with np.load(path) as f:
-        data = {k: f[k] for k in f.files}
-    shapes = dict(global_orient=(T, 3), body_pose=(T, 21, 3), left_hand_pose=(T, 15, 3), right_hand_pose=(T, 15, 3),
-                  jaw_pose=(T, 3), betas=(T, 10), transl=(T, 3), camera_scale=(T,), camera_trans=(T, 2), valid=(T,),
-                  keypoints_2d=(T, 67, 3), reprojection_error_px=(T,), fps=(), image_size=(2,), model_sha256=())
-    assert set(data) == set(shapes)
-    for k, shape in shapes.items():
-        assert data[k].shape == shape, k
-    assert data["valid"].dtype == bool and not data["valid"][5] and data["valid"].sum() == T - 1
-    assert data["fps"] == 25 and data["model_sha256"].dtype.kind == "U" and len(str(data["model_sha256"])) == 64
-    assert np.all(np.isfinite(data["reprojection_error_px"]))
-    assert data["image_size"].tolist() == [1000, 1000]
-
-    body = smplx.create(str(default_model_dir), model_type="smplx", use_pca=False, flat_hand_mean=True,
-                        batch_size=T)
-    def t(k):
-        return torch.tensor(data[k]).reshape(T, -1)
-    with torch.no_grad():
-        joints = body(global_orient=t("global_orient"), body_pose=t("body_pose"), left_hand_pose=t("left_hand_pose"),
-                      right_hand_pose=t("right_hand_pose"), jaw_pose=t("jaw_pose"), betas=t("betas"),
-                      transl=t("transl")).joints.numpy()
-    pix = data["camera_scale"][:, None, None] * joints[:, list(constants.OPENPOSE67_FROM_SMPLX), :2] \
-        + data["camera_trans"][:, None]
-    seen = data["keypoints_2d"][..., 2] > 0
-    dist = np.where(seen, np.linalg.norm(pix - data["keypoints_2d"][..., :2], axis=-1), 0)
-    torch_error = dist.sum(1) / np.maximum(seen.sum(1), 1)
-    np.testing.assert_allclose(torch_error, data["reprojection_error_px"], atol=0.01)
-
-    params = motion_params(read_motion(path))
-    ours = synthetic.openpose_projection(model, params, data["camera_scale"], data["camera_trans"])
-    assert np.abs(ours - pix).max() <= 0.01
-
 
 def test_image_size_is_inferred_from_the_keypoints():
     kp = np.zeros((2, 67, 3), np.float32)

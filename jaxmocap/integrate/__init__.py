@@ -10,7 +10,8 @@
 Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `fitting` (2D keypoints
 -> pose, shape, camera), `clip` (one person's whole clip as one problem: one shape, the 3D landmarks and
 the motion in every frame) with `clip_solver` (its matrix-free solver), `banded` (block-banded systems over
-frames) and `clip_start` (each limb's depth in its start chosen over the whole clip), `least_squares` (one body's
+frames), `clip_start` (each limb's depth in its start chosen over the whole clip) and `keypoint_start` (a start
+from 2D keypoints alone: the default pose turned as the torso shows), `least_squares` (one body's
 robust least squares), `levenberg_marquardt` (its optimistix solver: dense or CG steps, a stopping rule),
 `keypoints` (model keypoints with an analytic Jacobian), `mat3` (3x3 kernels), `eft` (exemplar fine-tuning of the
 body regressor), `smooth` (temporal), `camera`, `motion_arrays` (fits -> motion.npz arrays), `synthetic` (problems

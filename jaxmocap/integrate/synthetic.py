@@ -1,6 +1,7 @@
 """Synthetic fitting problems with known answers (tests and benchmarks): random plausible whole-body poses,
 projected with a known weak-perspective camera (or a pinhole one, the body placed by ``transl``), with pixel noise
-and dropped keypoints, and a perturbed start."""
+and dropped keypoints, and a perturbed start (`make_problem`); a body moving smoothly through a pinhole camera,
+its keypoints and its bones' directions as the 3D landmarks give them (`make_clip`)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxmocap.integrate import clip
+from jaxmocap.integrate.fitting import default_pose, openpose_keypoint_model
 from smplx_jax import BodyModel, SMPLXParams, constants, forward_joints, rotations
 
 IMAGE_SIZE = (1000, 1000)
@@ -95,3 +98,37 @@ def make_problem(model: BodyModel, t: int, seed: int = 0, noise_px: float = 2.0,
     init_betas = betas + rng.normal(0, 0.5 * perturb, betas.shape).astype(np.float32)
     init = _params(init_theta, init_betas, model.num_expression)
     return Synthetic(truth, scale, trans, clean, keypoints.astype(np.float32), init)
+
+
+class SyntheticClip(NamedTuple):
+    pose: np.ndarray  # (T, 55, 3) axis-angles
+    betas: np.ndarray  # (B,)
+    transl: np.ndarray  # (T, 3) the body's origin in the camera frame, metres
+    keypoints: np.ndarray  # (T, 67, 3) exact projections, confidence 1
+    directions: np.ndarray  # (T, N, 3) unit directions of `clip.BONES` in the camera frame
+
+
+def make_clip(model: BodyModel, frames: int, seed: int = 0, focal_length: float = 1500.0,
+              principal_point=(960.0, 540.0), fps: float = 30.0) -> SyntheticClip:
+    """A body swinging its joints smoothly about the fit's default pose, within their range (knees and elbows
+    bent, flat hands), turning, walking away from a pinhole camera and back (3 to 4.5 m, 0.5 m/s at most)."""
+    rng = np.random.default_rng(seed)
+    seconds = np.arange(frames) / fps
+    base, amplitude = np.asarray(default_pose(), np.float64), np.zeros((55, 3))
+    amplitude[1:22] = rng.normal(scale=0.2, size=(21, 3))
+    amplitude[0, 1] = 0.3
+    base[[4, 5], 0], base[18, 1], base[19, 1] = 0.6, -0.8, 0.8  # knees, elbows
+    amplitude[[4, 5, 18, 19]] = 0.0
+    amplitude[[4, 5], 0], amplitude[18, 1], amplitude[19, 1] = 0.3, 0.3, -0.3
+    pose = base[None] + amplitude[None] * np.sin(2 * np.pi * 0.7 * seconds)[:, None, None]
+    betas = rng.normal(scale=0.3, size=model.num_betas)
+    transl = np.stack([0.1 * np.sin(seconds), 0.05 * np.sin(seconds), 3.0 + 1.5 * np.sin(seconds / 3)], 1)
+    km = openpose_keypoint_model(model)
+    x = np.asarray(jax.vmap(lambda p, t: clip.points_3d(km, p, jnp.asarray(betas, jnp.float32), t))(
+        jnp.asarray(pose, jnp.float32), jnp.asarray(transl, jnp.float32)), np.float64)
+    pixels = focal_length * x[..., :2] / x[..., 2:] + np.asarray(principal_point)
+    keypoints = np.concatenate([pixels, np.ones(pixels.shape[:-1] + (1,))], -1)
+    a, b = (np.asarray(side) for side in zip(*clip.BONES))
+    directions = x[:, b] - x[:, a]
+    return SyntheticClip(pose, betas, transl, keypoints, directions / np.linalg.norm(directions, axis=-1,
+                                                                                     keepdims=True))

@@ -4,19 +4,24 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 import smplx_jax
 from jaxmocap.detect.openpose import read_openpose_json
 from jaxmocap.errors import InputError
-from jaxmocap.integrate import fitting
+from jaxmocap.integrate import ClipConfig
+from jaxmocap.integrate.fitting import params_from_full_pose
+from jaxmocap.integrate.keypoint_start import facing_pose
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import motion_params, read_motion, write_motion
-from jaxmocap.pipeline.records import Bodies
-from jaxmocap.pipeline.stages import motion_arrays, one_shape, smoothed
+from jaxmocap.pipeline.stages import Lens, lens_of, motion_arrays, placed_bodies
+from jaxmocap.pipeline.whole_clip import FittedClip, fitted_clip
 
 
 def read_keypoint_folder(folder) -> tuple[list[Path], np.ndarray]:
@@ -69,42 +74,64 @@ def infer_image_size(keypoints: np.ndarray) -> tuple[int, int]:
 
 
 def fit_keypoint_folder(keypoints_dir, out_dir, *, model_path=None, iterations: int | None = None, init=None,
-                        smooth: bool = False, image_size=None, fps: float = 30.0, progress: bool = True) -> Path:
+                        smooth: bool = True, image_size=None, focal_length: float | None = None, fps: float = 30.0,
+                        progress: bool = True) -> Path:
+    """Fit the person of an OpenPose JSON folder (`read_keypoint_folder`) as one clip (`whole_clip.fitted_clip`,
+    the 2D keypoints alone) through a pinhole camera of ``focal_length`` pixels (default `lens_of`'s) centred on
+    the image of ``image_size`` (default `infer_image_size`) and write ``out_dir/motion.npz``. Each frame starts
+    from ``init``'s pose (a motion.npz of the same frames) or `keypoint_start.facing_pose`, placed on its
+    keypoints; ``smooth`` False: the frames are unrelated images (no motion between them); ``iterations`` caps each
+    window's Levenberg-Marquardt steps (default `ClipConfig`'s)."""
     files, keypoints = read_keypoint_folder(keypoints_dir)
     keypoints = np.where(np.isfinite(keypoints).all(-1, keepdims=True), keypoints, 0.0).astype(np.float32)
-    iterations = fitting.ITERATIONS if iterations is None else iterations
-    if iterations < 0:
-        raise InputError(f"--iterations must be >= 0, got {iterations}")
+    config = ClipConfig() if iterations is None else ClipConfig(iterations=iterations)
+    if config.iterations < 0:
+        raise InputError(f"--iterations must be >= 0, got {config.iterations}")
     model_path = Path(model_path) if model_path else smplx_jax.default_model_path()
     model = smplx_jax.load_model(model_path)
     t = len(files)
-    init_params = scale = trans = None
+    params = None
     if init is not None:
         arrays = read_motion(init)
-        init_params = motion_params(arrays, model.num_expression)
         if arrays["betas"].shape != (t, model.num_betas):
             raise InputError(f"--init {init} has {arrays['betas'].shape[0]} frames x {arrays['betas'].shape[1]} "
                              f"betas; expected {t} x {model.num_betas}")
-        scale, trans = arrays["camera_scale"], arrays["camera_trans"]
-        if not (np.all(np.isfinite(scale)) and np.all(scale > 0)):
-            scale = trans = None
+        params = motion_params(arrays, model.num_expression)
+    size = tuple(image_size) if image_size else infer_image_size(keypoints)
+    lens = lens_of(size, focal_length)
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=t, unit="frame", desc="fit")
     try:
-        result = fitting.fit(model, keypoints, init_params, scale, trans, iterations=iterations,
-                             progress=bar.update if bar else None)
-    except ValueError as e:
-        raise InputError(str(e)) from None
+        bodies = fitted_keypoints(model, keypoints, lens, fps if smooth else None, params, config,
+                                  bar.update if bar else None).bodies
     finally:
         if bar is not None:
             bar.close()
-    bodies = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
-                    np.asarray(result.camera_trans), np.asarray(result.valid))
-    bodies = one_shape(model, bodies, keypoints, (None, None), fitting.FitConfig(), iterations)
-    motion = motion_arrays(model, smoothed(model, bodies, keypoints) if smooth else bodies, keypoints)
-    size = image_size if image_size else infer_image_size(keypoints)
+    motion = motion_arrays(model, bodies, keypoints, lens)
     return write_motion(Path(out_dir) / "motion.npz", motion | {
         "fps": np.asarray(fps), "image_size": np.asarray(size), "model_sha256": np.asarray(file_sha256(model_path))})
+
+
+def fitted_keypoints(model: smplx_jax.BodyModel, keypoints: Float[ArrayLike, "T 67 3"], lens: Lens,
+                     fps: float | None, init: smplx_jax.SMPLXParams | None = None, config: ClipConfig = ClipConfig(),
+                     progress: Callable[[int], object] | None = None) -> FittedClip:
+    """One person's 2D keypoints ``(T, 67, 3)`` fitted as one clip (`whole_clip.fitted_clip`, no 3D observation)
+    through the pinhole ``lens``, each frame from ``init``'s pose (T leading) or `keypoint_start.facing_pose`,
+    placed on its keypoints (`stages.placed_bodies`); fitted where any keypoint is seen."""
+    keypoints = np.asarray(keypoints, np.float32)
+    init = facing_params(model, keypoints) if init is None else init
+    found = np.any(keypoints[..., 2] > 0, -1)
+    start = placed_bodies(model, init, keypoints, lens, found)
+    return fitted_clip(model, keypoints, start.params, found, lens, fps, config=config, progress=progress)
+
+
+def facing_params(model: smplx_jax.BodyModel, keypoints: Float[ArrayLike, "T 67 3"]) -> smplx_jax.SMPLXParams:
+    """Each frame's `keypoint_start.facing_pose` (T leading; the mean shape, no translation)."""
+    return params_from_full_pose(_facing_poses(np.asarray(keypoints, np.float32)),
+                                 jnp.zeros((len(keypoints), model.num_betas)), model.num_expression)
+
+
+_facing_poses = jax.jit(jax.vmap(facing_pose))

@@ -8,16 +8,27 @@ stored in, in time linear in the run's length and memory flat (but for the choic
 """
 
 import dataclasses
+from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Bool, Float
 
 import smplx_jax
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import ClipConfig, fit_clip
 from jaxmocap.integrate.camera import weak_perspective_least_squares
-from jaxmocap.integrate.clip import BLAZEPOSE_OF_BODY25, BODY_BONES, HAND_BONES, SOLVED_JOINTS, clip_problem, points_3d
+from jaxmocap.integrate.clip import (
+    BLAZEPOSE_OF_BODY25,
+    BODY_BONES,
+    BONES,
+    HAND_BONES,
+    SOLVED_JOINTS,
+    clip_problem,
+    points_3d,
+)
 from jaxmocap.integrate.clip_start import hypothesis_costs, limb_codes, with_codes
 from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
@@ -36,8 +47,12 @@ NOISE_FLOOR_PX = 1.0
 WINDOW = 64
 MARGIN = 8
 # The shape's ten numbers are fitted on this many frames spread over the track (each gives over a hundred keypoint
-# coordinates and their bones' directions), then held in every window.
+# coordinates and their bones' directions), then held in every window. In a video they are SHAPE_RUNS runs of
+# consecutive frames, each fitted with its motion (without it, a frame seen in 2D alone has directions, depth and
+# twists, that only the priors hold, and the solve crawls along them), a frame left out after each run so that no
+# acceleration joins two runs.
 SHAPE_FRAMES = 32
+SHAPE_RUNS = 4
 HAND_SLICES = (slice(25, 46), slice(46, 67))
 
 
@@ -170,21 +185,64 @@ def with_hand_gaps_filled(track: Track, max_gap: int) -> Track:
                                hands_conf=filled.hands_conf, hand_boxes=filled.hand_boxes)
 
 
+def shape_frames(valid: Bool[ArrayLike, "T"], video: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The `SHAPE_FRAMES` frames the shape is fitted on and which of them count: of a ``video``, `SHAPE_RUNS`
+    runs of consecutive frames starting at valid frames spread over the track, each followed by one left out (the
+    runs' valid frames count); else valid frames spread over the track (padded with the last, not counting)."""
+    seen = np.flatnonzero(valid)
+    if video:
+        run = SHAPE_FRAMES // SHAPE_RUNS
+        starts = seen[np.round(np.linspace(0, len(seen) - 1, SHAPE_RUNS)).astype(int)]
+        starts = np.minimum(starts, max(len(valid) - run, 0))
+        frames = np.minimum((starts[:, None] + np.arange(run)).ravel(), len(valid) - 1)
+        found = np.asarray(valid)[frames] & np.tile(np.arange(run) < run - 1, SHAPE_RUNS)
+        return frames, found
+    spread = seen[np.unique(np.round(np.linspace(0, len(seen) - 1, min(len(seen), SHAPE_FRAMES))).astype(int))]
+    return np.concatenate([spread, np.full(SHAPE_FRAMES - len(spread), spread[-1])]), np.arange(SHAPE_FRAMES) < len(
+        spread)
+
+
+class FittedClip(NamedTuple):
+    """`fitted_clip`'s bodies, and for each frame whether the fits it came from (the shape's, its window's) met
+    their stopping rule rather than their step cap."""
+
+    bodies: Bodies
+    converged: np.ndarray  # (T,) bool
+
+
 def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | None,
                  config: ClipConfig = ClipConfig()) -> Bodies:
-    """The track's bodies as one fit (module docstring) through the pinhole ``lens``: ``track.bodies`` is each
-    frame's start (its ``transl`` in the camera frame); ``fps`` the frame rate (None: unrelated images, no motion
-    between them). Valid where the start was."""
-    valid = np.asarray(track.found & track.bodies.valid)
-    count = len(valid)
-    if not valid.any():
-        return track.bodies
+    """The track's bodies as one fit (`fitted_clip`) through the pinhole ``lens``, observing its 2D keypoints and
+    its 3D landmarks' bone directions (`bone_directions`), a hand lost for a moment interpolated in a video:
+    ``track.bodies`` is each frame's start (its ``transl`` in the camera frame); ``fps`` the frame rate (None:
+    unrelated images, no motion between them). Valid where the start was."""
     if fps:
         track = with_hand_gaps_filled(track, round(HAND_GAP_SECONDS * fps))
-    keypoints = np.asarray(track.keypoints_2d, np.float32)
-    sigma = keypoint_noise_px(keypoints)
     directions, weight = bone_directions(track, lens)
-    start = track.bodies.params
+    return fitted_clip(model, track.keypoints_2d, track.bodies.params, track.found & track.bodies.valid, lens, fps,
+                       directions, weight, config).bodies
+
+
+def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67 3"], start: smplx_jax.SMPLXParams,
+                valid: Bool[ArrayLike, "T"], lens, fps: float | None,
+                directions: Float[ArrayLike, "T N 3"] | None = None,
+                direction_weight: Float[ArrayLike, "T N"] | None = None, config: ClipConfig = ClipConfig(),
+                progress: Callable[[int], object] | None = None) -> FittedClip:
+    """One person's frames as one fit (module docstring) through the pinhole ``lens``: ``keypoints_2d`` the 2D
+    targets, ``start`` each frame's start (T leading, ``transl`` in the camera frame), fitted where ``valid``;
+    ``directions`` and ``direction_weight`` the bones' observed directions and their confidence (None: none
+    observed, the 2D keypoints alone); ``fps`` the frame rate (None: unrelated images, no motion between them).
+    ``progress(frames)`` is told of each window's frames as they are fitted. Valid where ``valid`` and finite."""
+    valid = np.asarray(valid, bool)
+    count = len(valid)
+    if not valid.any():
+        return FittedClip(Bodies(start, np.ones(count, np.float32), np.zeros((count, 2), np.float32), valid), valid)
+    keypoints = np.asarray(keypoints_2d, np.float32)
+    sigma = keypoint_noise_px(keypoints)
+    if directions is None:
+        directions = np.zeros((count, len(BONES), 3), np.float32)
+        direction_weight = np.zeros((count, len(BONES)), np.float32)
+    directions, weight = np.asarray(directions, np.float32), np.asarray(direction_weight, np.float32)
     focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
 
     def solve(fit, frames, found, rate, betas=None):
@@ -203,23 +261,29 @@ def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | No
             inside = (span >= 0) & (span < count)
             yield np.clip(span, 0, count - 1), inside, inside & (span >= first) & (span < first + WINDOW)
 
-    def in_windows(fit, betas, keep=lambda result: result):
-        """What ``keep`` takes of ``fit``'s results (frames leading) over the track, window by window."""
-        parts = [jax.tree.map(lambda a: np.asarray(a)[core],
-                              keep(solve(fit, frames, inside & valid[frames], fps or 0.0, betas)))
-                 for frames, inside, core in windows()]
+    def in_windows(fit, betas, keep=lambda result: result, told=lambda frames: None):
+        """What ``keep`` takes of ``fit``'s results (frames leading) over the track, window by window, each
+        window's frames ``told``."""
+        parts = []
+        for frames, inside, core in windows():
+            result = keep(solve(fit, frames, inside & valid[frames], fps or 0.0, betas))
+            parts.append(jax.tree.map(lambda a: np.asarray(a)[core], result))
+            told(int(core.sum()))
         return jax.tree.map(lambda *a: np.concatenate(a), *parts)
 
-    seen = np.flatnonzero(valid)
-    spread = seen[np.unique(np.round(np.linspace(0, len(seen) - 1, min(len(seen), SHAPE_FRAMES))).astype(int))]
-    frames = np.concatenate([spread, np.full(SHAPE_FRAMES - len(spread), spread[-1])])
-    shape = np.asarray(solve(_fit, frames, np.arange(SHAPE_FRAMES) < len(spread), 0.0).params.betas[0])
+    shaped = solve(_fit, *shape_frames(valid, bool(fps)), fps or 0.0)  # one shape, fitted on `shape_frames`
+    shape = np.asarray(shaped.params.betas[0])
     if fps:  # each limb's depth chosen over the whole track (`clip_start`)
         unary, triple, hypotheses = in_windows(_hypotheses, shape)
         codes = _limb_codes(unary, triple)
         pose = np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(start))[:, list(SOLVED_JOINTS)]
         start = start.replace(body_pose=np.asarray(with_codes(pose, hypotheses, codes))[:, 1:22])
-    params = in_windows(_fit, shape, lambda result: result.params)
+
+    def with_converged(result):
+        return result.params, jnp.full(result.params.betas.shape[:1], result.converged)
+
+    params, converged = in_windows(_fit, shape, with_converged, progress or (lambda frames: None))
     finite = np.all(np.isfinite(np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(params))), (1, 2))
     scale, trans = _weak_cameras(openpose_keypoint_model(model), params, focal, centre, keypoints[..., 2])
-    return Bodies(params, np.asarray(scale), np.asarray(trans), valid & finite)
+    return FittedClip(Bodies(params, np.asarray(scale), np.asarray(trans), valid & finite),
+                      converged & bool(shaped.converged))
