@@ -211,7 +211,8 @@ def _run_options(p) -> None:
     p.add_argument("--focal-length", type=float, default=None, metavar="PX",
                    help="the camera's focal length in pixels (default: a phone's main camera, 0.75 x the long side)")
     p.add_argument("--chunk", type=int, default=128, help="frames per resumable chunk (default: %(default)s)")
-    p.add_argument("--no-smooth", action="store_true", help="no temporal smoothing")
+    p.add_argument("--no-smooth", action="store_true",
+                   help="no motion between frames: each fitted as an unrelated image (--mode hands: no smoothing)")
     p.add_argument("--no-overlay", action="store_true", help="no overlay video")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 

@@ -11,7 +11,6 @@ import threading
 from pathlib import Path
 
 import cv2
-import jax
 import numpy as np
 import pytest
 import smplx
@@ -562,31 +561,3 @@ def test_every_option_that_shapes_a_chunk_keys_the_store(tmp_path):
 def test_run_config_refuses_what_cannot_run(options, message):
     with pytest.raises(InputError, match=message):
         RunConfig(CLIP, **options)
-
-
-def _pinhole_keypoints(model, params, lens):
-    """``(T, 67, 3)``: the OpenPose keypoints of the bodies ``params`` (T leading) through the pinhole ``lens``
-    (focal length, principal point), every one seen."""
-    joints = np.asarray(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params))
-    joints = joints[:, constants.OPENPOSE67_FROM_SMPLX]
-    return np.concatenate([lens[0] * joints[..., :2] / joints[..., 2:] + lens[1], np.ones((len(joints), 67, 1))], -1)
-
-
-def test_smoothing_keeps_fits_it_would_take_off_their_person():
-    """Fits that flip between two arm poses from frame to frame average to neither: each keeps its own pose; a
-    slowly moving arm is smoothed (and stays on its keypoints)."""
-    from jaxmocap.integrate.motion_arrays import reprojection_errors
-    from jaxmocap.pipeline import Bodies, smoothed
-
-    model = smplx_jax.load_model(smplx_jax.default_model_path())
-    lens = (1000.0, np.array([500.0, 500.0]))
-    for name, angles in (("flipping", 1.2 * (-1.0) ** np.arange(FRAMES)), ("slow", np.linspace(0.0, 0.2, FRAMES))):
-        params = jax.tree.map(lambda a: np.repeat(np.asarray(a)[None], FRAMES, 0), smplx_jax.SMPLXParams.zeros())
-        params.body_pose[:, 15, 2] = angles  # the left shoulder about the camera axis
-        params.transl[:, 2] = 3.0
-        keypoints = _pinhole_keypoints(model, params, lens)
-        bodies = Bodies(params, np.ones(FRAMES), np.zeros((FRAMES, 2)), np.ones(FRAMES, bool))
-        out = smoothed(model, bodies, keypoints, lens)
-        errors = reprojection_errors(model, out.params, out.camera_scale, out.camera_trans, keypoints, *lens)
-        assert errors.max() < 2.0, name
-        assert np.array_equal(out.params.body_pose, params.body_pose) == (name == "flipping"), name

@@ -57,7 +57,8 @@ def _on_ray(near: Float[Array, "3"], far: Float[Array, "3"], length, other_side:
     farther than ``length`` from ``near``."""
     ray = far / jnp.linalg.norm(far)
     along = jnp.dot(ray, near)
-    half = jnp.sqrt(jnp.maximum(along**2 - jnp.dot(near, near) + length**2, 0.0))
+    across = near - along * ray  # from the ray to ``near`` (not |near|^2 - along^2: metres squared cancel in float32)
+    half = jnp.sqrt(jnp.maximum(length**2 - jnp.dot(across, across), 0.0))
     side = jnp.where(jnp.dot(ray, far) >= along, 1.0, -1.0)
     return (along + (-side if other_side else side) * half) * ray
 

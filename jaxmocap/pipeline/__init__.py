@@ -18,8 +18,8 @@ from jaxmocap.pipeline.entry import run
 from jaxmocap.pipeline.observe import Observations, observe
 from jaxmocap.pipeline.records import Bodies, Chunk
 from jaxmocap.pipeline.report import RunReport
-from jaxmocap.pipeline.stages import initial_bodies, motion_arrays, observations, smoothed
-from jaxmocap.pipeline.whole_clip import fitted_track
+from jaxmocap.pipeline.stages import initial_bodies, motion_arrays, observations
+from jaxmocap.pipeline.whole_clip import fitted_clip, fitted_track
 
-__all__ = ["Bodies", "Chunk", "Observations", "RunConfig", "RunReport", "fitted_track", "initial_bodies",
-           "motion_arrays", "observations", "observe", "run", "smoothed"]
+__all__ = ["Bodies", "Chunk", "Observations", "RunConfig", "RunReport", "fitted_clip", "fitted_track", "initial_bodies",
+           "motion_arrays", "observations", "observe", "run"]

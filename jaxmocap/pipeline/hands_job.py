@@ -32,9 +32,13 @@ from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.report import RunReport
-from jaxmocap.pipeline.stages import SMOOTHING_SLACK
 
 SETTINGS_VERSION = 1  # of the stored chunks
+# (times, pixels): how much farther from its keypoints than its own fit a smoothed hand may reproject before the frame
+# keeps its fit. Each frame's hand is fitted alone, and one frame's fit can turn the hand round in depth from the
+# next's (each matches its image, their average neither): smoothing a moving hand over a few frames moves its
+# keypoints by a fraction of its fit's error, an average across such a turn by the hand's size.
+SMOOTHING_SLACK = (3.0, 20.0)
 
 # One row per hand seen in a frame: (column, shape after the row axis)
 COLUMNS = {"frame": (), "hand_id": (), "side": (), "keypoints_2d": (21, 3), "world": (21, 3), "score": (),
@@ -205,7 +209,7 @@ def whole_table(chunks: list[HandChunk]) -> dict[str, np.ndarray]:
 def side_arrays(table: dict[str, np.ndarray], frames: int, hand_models: dict, smooth: bool) -> dict[str, np.ndarray]:
     """hands.npz's per-side arrays over ``frames`` frames: in each frame the side's likeliest hand (highest
     presence) of the table; smoothed over time (``smooth``), except where smoothing would take a hand off its
-    keypoints (`stages.SMOOTHING_SLACK`)."""
+    keypoints (`SMOOTHING_SLACK`)."""
     out = {}
     for k, side in enumerate(SIDES):
         arrays = {name: np.zeros((frames,) + shape, bool if name == "valid" else np.float32)

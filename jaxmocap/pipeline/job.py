@@ -39,11 +39,10 @@ from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import (
     Lens,
     lens_of,
+    median_shape,
     motion_arrays,
     observations,
-    one_shape,
     placed_bodies,
-    smoothed,
 )
 from jaxmocap.pipeline.whole_clip import fitted_track, with_start
 
@@ -108,13 +107,9 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
             if fit:  # the whole clip as one fit
                 return fitted_track(inputs.model, track, inputs.lens,
                                     inputs.media.fps if video and config.smooth else None)
-            return one_shape(inputs.model, track.bodies, track.keypoints_2d, inputs.lens, None)  # as regressed
+            return median_shape(track.bodies)  # as regressed
 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
-    with chrono("smooth"):
-        if config.smooth and not fit:  # (the clip fit's motion term is its smoothing)
-            tracks = {i: dataclasses.replace(t, bodies=smoothed(inputs.model, t.bodies, t.keypoints_2d, inputs.lens))
-                      for i, t in tracks.items()}
     with chrono("write"):
         meta = {"fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
                 "model_sha256": np.asarray(inputs.model_sha256), "landmark_model": np.asarray(inputs.landmarks)}

@@ -4,7 +4,8 @@ placed in the camera; in windows placed by frame number, `whole_clip.with_start`
 fit of the person's whole clip: the 2D keypoints, the 3D landmarks, anatomy, motion, one shape) -> `motion_arrays`
 (what ``motion.npz`` holds); then the outputs (`outputs`). With FrankMocap's weights the regressors
 (`regress.regressed_bodies`) give each frame's start instead (`placed_bodies`); with ``--integration copy-paste`` or
-``eft`` their bodies are the motion as they are: `one_shape` (their median shape) -> `smoothed`."""
+``eft`` their bodies are the motion as they are, with one shape (`median_shape`), unsmoothed as in FrankMocap,
+which smooths only after its optimization."""
 
 import dataclasses
 
@@ -15,14 +16,12 @@ import numpy as np
 import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.identities import IdentityTracker
-from jaxmocap.integrate import FitConfig, body_from_blazepose, fit, fitted_motion, hand_into_body
+from jaxmocap.integrate import FitConfig, body_from_blazepose, fitted_motion, hand_into_body
 from jaxmocap.integrate.camera import default_focal_length, weak_perspective_from_points
 from jaxmocap.integrate.fitting import openpose_keypoint_model, params_from_full_pose
 from jaxmocap.integrate.keypoints import keypoints_cm
-from jaxmocap.integrate.motion_arrays import reprojection_errors
-from jaxmocap.integrate.smooth import smooth_camera, smooth_params
 from jaxmocap.pipeline.observe import Observations, observe_people, repair_side_swaps
-from jaxmocap.pipeline.records import Bodies, frames_where
+from jaxmocap.pipeline.records import Bodies
 
 Lens = tuple[float, np.ndarray] | tuple[None, None]  # a pinhole camera's (focal_length, principal_point), or none
 
@@ -100,51 +99,13 @@ def lens_of(image_size: tuple[int, int], focal_length: float | None = None) -> L
     return focal_length or default_focal_length(image_size), np.asarray(image_size, np.float32) / 2
 
 
-def one_shape(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens,
-              config: FitConfig | None, iterations: int = 20) -> Bodies:
-    """One body shape for the person in every frame: the per-component median of the frames' fitted ``betas``
-    over the valid frames, then each frame's pose and camera fitted again with that shape held (``config``: the
-    fit's; None, as after copy-and-paste, keeps the poses). A person has one body, and exports one bone length."""
+def median_shape(bodies: Bodies) -> Bodies:
+    """The bodies with one shape in every frame, the per-component median of the valid frames' ``betas`` (the
+    regressors' estimates of one body: a person exports one bone length), their poses as they are."""
     if not bodies.valid.any():
         return bodies
     betas = np.broadcast_to(np.median(bodies.params.betas[bodies.valid], axis=0), bodies.params.betas.shape)
-    params = bodies.params.replace(betas=np.array(betas, np.float32))
-    if config is None:
-        return dataclasses.replace(bodies, params=params)
-    result = jax.block_until_ready(fit(model, keypoints_2d, init=params, focal_length=lens[0],
-                                       principal_point=lens[1], iterations=iterations, config=config,
-                                       fixed_shape=True))
-    refitted = Bodies(jax.tree.map(np.asarray, result.params), np.asarray(result.camera_scale),
-                      np.asarray(result.camera_trans), bodies.valid)
-    use = bodies.valid & np.asarray(result.valid)  # a frame whose refit failed keeps its pose
-    return frames_where(use, refitted, dataclasses.replace(bodies, params=params))
-
-
-@jax.jit
-def _smooth(params, scale, trans, valid):
-    return smooth_params(params, valid), *smooth_camera(scale, trans, valid)
-
-
-SMOOTHING_SLACK = (3.0, 20.0)  # (times, pixels): how much farther a smoothed body may reproject than its fit
-
-
-def smoothed(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens = (None, None)
-             ) -> Bodies:
-    """Rotations (as quaternions), shape, translation and camera filtered over time across valid frames
-    (`jaxmocap.integrate.smooth`); invalid frames are left as they are. Smoothing must not take a body off its
-    person: where neighbouring fits disagree (a body seen from behind, turned one way in one frame and the other in
-    the next: each matches the image, their average matches neither) and the smoothed body reprojects more than
-    `SMOOTHING_SLACK` farther from the 2D keypoints than the frame's own fit, the frame keeps its fit."""
-    if not bodies.valid.any():
-        return bodies
-    params, scale, trans = jax.tree.map(np.asarray, _smooth(bodies.params, bodies.camera_scale, bodies.camera_trans,
-                                                            bodies.valid))
-    smooth = Bodies(params, scale, trans, bodies.valid)
-    fitted, filtered = (reprojection_errors(model, b.params, b.camera_scale, b.camera_trans, keypoints_2d, *lens)
-                        for b in (bodies, smooth))
-    ratio, pixels = SMOOTHING_SLACK
-    keep = filtered > np.maximum(ratio * fitted, fitted + pixels)
-    return frames_where(keep, bodies, smooth)
+    return dataclasses.replace(bodies, params=bodies.params.replace(betas=np.array(betas, np.float32)))
 
 
 def motion_arrays(model: smplx_jax.BodyModel, bodies: Bodies, keypoints_2d: np.ndarray, lens: Lens = (None, None)
