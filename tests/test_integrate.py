@@ -330,3 +330,10 @@ def test_fit_command_errors_are_one_line(tmp_path, capsys):
     (tmp_path / "kp" / "a_keypoints.json").write_text("{not json")
     assert main(["fit", str(tmp_path / "kp"), "--out", str(tmp_path / "out")]) == 2
     assert "a_keypoints.json" in capsys.readouterr().err
+    (tmp_path / "kp" / "a_keypoints.json").write_text('{"people": []}')
+    for option, message in ((["--focal-length", "0"], "--focal-length must be positive"),
+                            (["--image-size", "0", "480"], "--image-size must be positive"),
+                            (["--iterations", "-1"], "--iterations must be >= 0")):
+        assert main(["fit", str(tmp_path / "kp"), "--out", str(tmp_path / "out"), *option]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err, err
