@@ -20,8 +20,9 @@ from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.keypoint_start import facing_pose
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import motion_params, read_motion, write_motion
+from jaxmocap.pipeline.records import Bodies
 from jaxmocap.pipeline.stages import Lens, lens_of, motion_arrays, placed_bodies
-from jaxmocap.pipeline.whole_clip import FittedClip, fitted_clip
+from jaxmocap.pipeline.whole_clip import FittedClip, blocks, fitted_clip
 
 
 def read_keypoint_folder(folder) -> tuple[list[Path], np.ndarray]:
@@ -128,7 +129,10 @@ def fitted_keypoints(model: smplx_jax.BodyModel, keypoints: Float[ArrayLike, "T 
     keypoints = np.asarray(keypoints, np.float32)
     init = facing_params(model, keypoints) if init is None else init
     found = np.any(keypoints[..., 2] > 0, -1)
-    start = placed_bodies(model, init, keypoints, lens, found)
+    start = Bodies.concatenate([  # placed block by block: memory flat however long the clip
+        jax.tree.map(lambda a: np.asarray(a)[:kept], placed_bodies(
+            model, jax.tree.map(lambda a: np.asarray(a)[frames], init), keypoints[frames], lens, found[frames]))
+        for frames, kept in blocks(len(keypoints))])
     return fitted_clip(model, keypoints, start.params, found, lens, fps, config=config, progress=progress)
 
 

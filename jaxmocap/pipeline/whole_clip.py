@@ -158,18 +158,22 @@ def _observations(track: Track) -> Observations:
                         track.hand_boxes, track.found)
 
 
+def blocks(count: int):
+    """Each block of `WINDOW` frames of ``count``, placed by frame number: its frames (the last block padded with
+    the last frame, so that one program serves every block) and how many of them are its own."""
+    for first in range(0, count, WINDOW):
+        yield np.minimum(np.arange(first, first + WINDOW), count - 1), min(WINDOW, count - first)
+
+
 def with_start(model: smplx_jax.BodyModel, track: Track, lens) -> Track:
     """The track with each frame's start for the clip fit (`stages.initial_bodies`: IK from its 3D landmarks,
     placed in the pinhole ``lens``), solved in windows of `WINDOW` frames placed by frame number (the last padded
     with its last frame): a batched solve's rounding depends on what shares its batch, and the clip fit's flat
     directions (depth, twists) carry such differences far, so the start must not depend on the chunks the run was
     observed in."""
-    count = len(track.found)
     parts = []
-    for first in range(0, count, WINDOW):
-        frames = np.minimum(np.arange(first, first + WINDOW), count - 1)
+    for frames, kept in blocks(len(track.found)):
         window = _observations(jax.tree.map(lambda a: np.asarray(a)[frames], track))
-        kept = min(WINDOW, count - first)
         if not window.found.any():  # (a person of a long run absent for a while)
             parts.append(Bodies.absent(kept, model))
             continue
@@ -261,12 +265,12 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
             inside = (span >= 0) & (span < count)
             yield np.clip(span, 0, count - 1), inside, inside & (span >= first) & (span < first + WINDOW)
 
-    def in_windows(fit, betas, keep=lambda result: result, told=lambda frames: None):
-        """What ``keep`` takes of ``fit``'s results (frames leading) over the track, window by window, each
-        window's frames ``told``."""
+    def in_windows(fit, betas, keep=lambda result, frames: result, told=lambda frames: None):
+        """What ``keep`` takes of ``fit``'s results and the window's frames (frames leading) over the track, window
+        by window, each window's frames ``told``."""
         parts = []
         for frames, inside, core in windows():
-            result = keep(solve(fit, frames, inside & valid[frames], fps or 0.0, betas))
+            result = keep(solve(fit, frames, inside & valid[frames], fps or 0.0, betas), frames)
             parts.append(jax.tree.map(lambda a: np.asarray(a)[core], result))
             told(int(core.sum()))
         return jax.tree.map(lambda *a: np.concatenate(a), *parts)
@@ -279,11 +283,12 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
         pose = np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(start))[:, list(SOLVED_JOINTS)]
         start = start.replace(body_pose=np.asarray(with_codes(pose, hypotheses, codes))[:, 1:22])
 
-    def with_converged(result):
-        return result.params, jnp.full(result.params.betas.shape[:1], result.converged)
+    def with_cameras(result, frames):  # and whether the window converged
+        cameras = _weak_cameras(openpose_keypoint_model(model), result.params, focal, centre,
+                                keypoints[frames][..., 2])
+        return result.params, cameras, jnp.full(frames.shape, result.converged)
 
-    params, converged = in_windows(_fit, shape, with_converged, progress or (lambda frames: None))
+    params, (scale, trans), converged = in_windows(_fit, shape, with_cameras, progress or (lambda frames: None))
     finite = np.all(np.isfinite(np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(params))), (1, 2))
-    scale, trans = _weak_cameras(openpose_keypoint_model(model), params, focal, centre, keypoints[..., 2])
-    return FittedClip(Bodies(params, np.asarray(scale), np.asarray(trans), valid & finite),
+    return FittedClip(Bodies(params, scale, trans, valid & finite),
                       converged & bool(shaped.converged))
