@@ -26,7 +26,7 @@ def test_factor_and_solve_match_dense_solves():
     systems = [random_banded(rng, 7, m) for m in (4, 2)]
     np.testing.assert_allclose(np.asarray(systems[0][0].dense()), systems[0][1], rtol=1e-5, atol=1e-4)
     g = [rng.normal(size=(7, m)) for m in (4, 2)]
-    solved = [banded.solve(banded.factor(a), jnp.asarray(gi, jnp.float32)) for (a, _), gi in zip(systems, g)]
+    solved = banded.solve(banded.factor([a for a, _ in systems]), [jnp.asarray(gi, jnp.float32) for gi in g])
     for (_, dense), gi, x in zip(systems, g, solved):
         expected = np.linalg.solve(dense, gi.reshape(-1)).reshape(gi.shape)
         np.testing.assert_allclose(np.asarray(x), expected, rtol=1e-3, atol=1e-4 * np.abs(expected).max())

@@ -3,14 +3,15 @@ for ``|t - s| > 2``, factored and solved exactly, frame by frame (work linear in
 ``T^3``).
 
 ``A`` is held by its lower blocks (`Banded`): ``diagonal[t] = A[t, t]``, ``first[t] = A[t + 1, t]``,
-``second[t] = A[t + 2, t]`` (rows past the end are ignored). Each frame's step factors one ``m x m`` block,
-never a batch of them: jaxlib's batched LAPACK kernels run on XLA's thread pool, and two at once on a
+``second[t] = A[t + 2, t]`` (rows past the end are ignored). Each frame's step factors one ``m x m`` block of each
+system, never a batch of them: jaxlib's batched LAPACK kernels run on XLA's thread pool, and two at once on a
 two-core machine wait on each other for ever. A matrix that is not positive definite gives non-finite values
 (a solver's step is then refused), never an exception.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
@@ -53,49 +54,48 @@ def _shifted(blocks, by: int):
     return jnp.concatenate([jnp.zeros_like(blocks[:by]), blocks[:blocks.shape[0] - by]])
 
 
-def _right_solve_t(lower, b):
-    """``b lower^-T`` for a lower triangular ``lower``."""
-    return solve_triangular(lower, b.T, lower=True).T
-
-
-def factor(a: Banded) -> Factor:
-    """The block Cholesky factor of ``a``, frame by frame: ``L[t, t-2] = A[t, t-2] L[t-2, t-2]^-T``,
-    ``L[t, t-1] = (A[t, t-1] - L[t, t-2] L[t-1, t-2]^T) L[t-1, t-1]^-T``, ``L[t, t]`` the Cholesky factor of
-    ``A[t, t] - L[t, t-1] L[t, t-1]^T - L[t, t-2] L[t, t-2]^T``."""
-    eye = jnp.eye(a.diagonal.shape[1], dtype=a.diagonal.dtype)
+def factor(systems: Sequence[Banded]) -> tuple[Factor, ...]:
+    """The block Cholesky factor of each of ``systems`` (each its own ``m``; one pass over the frames for all),
+    frame by frame: ``L[t, t-2] = A[t, t-2] L[t-2, t-2]^-T``, ``L[t, t-1] = (A[t, t-1] - L[t, t-2] L[t-1, t-2]^T)
+    L[t-1, t-1]^-T`` (products with the inverses already found), ``L[t, t]`` the Cholesky factor of ``A[t, t] -
+    L[t, t-1] L[t, t-1]^T - L[t, t-2] L[t, t-2]^T``."""
+    eyes = [jnp.eye(a.diagonal.shape[1], dtype=a.diagonal.dtype) for a in systems]
 
     def row(carry, blocks):
-        before, before_first, before2 = carry  # L[t-1, t-1], L[t-1, t-2], L[t-2, t-2]
-        diagonal, first, second = blocks  # A[t, t], A[t, t-1], A[t, t-2]
-        l2 = _right_solve_t(before2, second)
-        l1 = _right_solve_t(before, first - l2 @ before_first.T)
-        l0 = jnp.linalg.cholesky(diagonal - l1 @ l1.T - l2 @ l2.T)
-        return (l0, l1, before), (l1, l2, solve_triangular(l0, eye, lower=True))
+        out, new = [], []
+        for (inverse1, before_first, inverse2), (diagonal, first, second), eye in zip(carry, blocks, eyes):
+            # inverse1 = L[t-1, t-1]^-1, before_first = L[t-1, t-2], inverse2 = L[t-2, t-2]^-1
+            l2 = second @ inverse2.T
+            l1 = (first - l2 @ before_first.T) @ inverse1.T
+            inverse = solve_triangular(jnp.linalg.cholesky(diagonal - l1 @ l1.T - l2 @ l2.T), eye, lower=True)
+            new.append((inverse, l1, inverse1))
+            out.append((l1, l2, inverse))
+        return new, out
 
-    _, blocks = jax.lax.scan(row, (eye, jnp.zeros_like(eye), eye),
-                             (a.diagonal, _shifted(a.first, 1), _shifted(a.second, 2)))
-    return Factor(*blocks)
+    start = [(eye, jnp.zeros_like(eye), eye) for eye in eyes]
+    _, blocks = jax.lax.scan(row, start, [(a.diagonal, _shifted(a.first, 1), _shifted(a.second, 2))
+                                          for a in systems])
+    return tuple(Factor(*b) for b in blocks)
 
 
-def solve(f: Factor, g: Float[Array, "T m"]) -> Float[Array, "T m"]:
-    """``A^-1 g`` from ``A``'s factor: ``L z = g`` forwards, then ``L^T x = z`` backwards."""
-    zero = jnp.zeros_like(g[0])
+def solve(factors: Sequence[Factor], gs: Sequence[Float[Array, "T _"]]) -> tuple[Float[Array, "T _"], ...]:
+    """``A^-1 g`` of each system from its factor (`factor`): ``L z = g`` forwards, then ``L^T x = z`` backwards,
+    one pass each way for all."""
+    zeros = [(jnp.zeros_like(g[0]), jnp.zeros_like(g[0])) for g in gs]
 
     def forward(carry, blocks):
-        z1, z2 = carry  # z[t-1], z[t-2]
-        l1, l2, inverse, gt = blocks
-        z = inverse @ (gt - l1 @ z1 - l2 @ z2)
-        return (z, z1), z
+        new = [(f.inverse @ (gt - f.first @ z1 - f.second @ z2), z1)
+               for (z1, z2), (f, gt) in zip(carry, blocks)]  # z[t], z[t-1]
+        return new, [z for z, _ in new]
 
-    _, z = jax.lax.scan(forward, (zero, zero), (f.first, f.second, f.inverse, g))
-    up1 = jnp.concatenate([f.first[1:], jnp.zeros_like(f.first[:1])])  # L[t+1, t]
-    up2 = jnp.concatenate([f.second[2:], jnp.zeros_like(f.second[:2])])  # L[t+2, t]
+    _, zs = jax.lax.scan(forward, zeros, [(f, g) for f, g in zip(factors, gs)])
+    up = [(jnp.concatenate([f.first[1:], jnp.zeros_like(f.first[:1])]),  # L[t+1, t]
+           jnp.concatenate([f.second[2:], jnp.zeros_like(f.second[:2])]), f.inverse) for f in factors]  # L[t+2, t]
 
     def backward(carry, blocks):
-        x1, x2 = carry  # x[t+1], x[t+2]
-        u1, u2, inverse, zt = blocks
-        x = inverse.T @ (zt - u1.T @ x1 - u2.T @ x2)
-        return (x, x1), x
+        new = [(inverse.T @ (zt - u1.T @ x1 - u2.T @ x2), x1)
+               for (x1, x2), ((u1, u2, inverse), zt) in zip(carry, blocks)]  # x[t], x[t+1]
+        return new, [x for x, _ in new]
 
-    _, x = jax.lax.scan(backward, (zero, zero), (up1, up2, f.inverse, z), reverse=True)
-    return x
+    _, xs = jax.lax.scan(backward, zeros, [(u, z) for u, z in zip(up, zs)], reverse=True)
+    return tuple(xs)

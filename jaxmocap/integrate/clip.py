@@ -301,17 +301,15 @@ class ClipBlocks(NamedTuple):
         def hand_of(step, h):
             return step.pose[:, BODY + 15 * h:BODY + 15 * (h + 1)].reshape(frames, 45)
 
-        def factor(blocks, shift_rows):
-            return banded.factor(blocks._replace(diagonal=blocks.diagonal + jax.vmap(jnp.diag)(shift_rows)))
-
-        body = factor(self.body, body_of(shift))
-        hands = [factor(hand, hand_of(shift, h)) for h, hand in enumerate(self.hands)]  # one after the other
+        shifted = [blocks._replace(diagonal=blocks.diagonal + jax.vmap(jnp.diag)(rows)) for blocks, rows in
+                   zip((self.body, *self.hands), (body_of(shift), hand_of(shift, 0), hand_of(shift, 1)))]
+        factors = banded.factor(shifted)
         betas = 1.0 / (self.betas + shift.betas)
 
         def apply(v: Step) -> Step:
-            solved = banded.solve(body, body_of(v))
-            fingers = [banded.solve(hand, hand_of(v, h)).reshape(frames, 15, 3) for h, hand in enumerate(hands)]
-            pose = jnp.concatenate([solved[:, :3 * BODY].reshape(frames, BODY, 3), *fingers], 1)
+            solved, *fingers = banded.solve(factors, (body_of(v), hand_of(v, 0), hand_of(v, 1)))
+            pose = jnp.concatenate([solved[:, :3 * BODY].reshape(frames, BODY, 3),
+                                    *(f.reshape(frames, 15, 3) for f in fingers)], 1)
             return Step(pose, solved[:, 3 * BODY:], betas * v.betas)
 
         return apply
