@@ -324,10 +324,12 @@ def _coincide(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool
 
 
 def _on_body(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
-    """Whether most (60%) of ``new``'s visible landmarks lie within a quarter of ``known``'s torso of its skeleton
-    (`BONES`): a second skeleton the landmark model laid over one person (their upper body taken for a whole
-    person, or a deep bend), 81-100% on the clips' crops. Two people, however they overlap, stay below 31% (the
-    two-person take, mirrored, rotated, cropped): one's visible landmarks are where the other does not hide them."""
+    """Whether most (more than half) of ``new``'s visible landmarks lie on ``known``'s body: within a quarter of
+    its torso's length of its skeleton (`BONES`), a limb's radius (a thigh's is about a sixth of the torso) and the
+    landmark model's noise (a few hundredths of it). A second skeleton the landmark model laid over one person
+    (their upper body taken for a whole person, or a deep bend) has every landmark on that body; of two people,
+    however they overlap, one's visible landmarks are where the other does not hide them, so at most those along
+    the edge they share lie on the other's body."""
     scale = np.asarray(size, np.float64)
     points = new.landmarks[:, :2] * scale
     visible = new.landmarks[:, 3] >= 0.5
@@ -338,7 +340,7 @@ def _on_body(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
     along = np.clip(np.einsum("pbk,bk->pb", points[:, None] - start, bone) / np.maximum(np.sum(bone**2, 1), 1e-9),
                     0.0, 1.0)
     distance = np.linalg.norm(points[:, None] - (start + along[..., None] * bone), axis=2).min(1)
-    return bool(np.mean(distance < 0.25 * torso) >= 0.6)
+    return bool(np.mean(distance < 0.25 * torso) > 0.5)
 
 
 def _same_person(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
