@@ -57,9 +57,9 @@ def test_each_limb_hypothesis_keeps_its_joints_pixels_and_bone_lengths():
 
 def test_a_limb_turned_in_depth_for_a_few_frames_is_chosen_back():
     """A start (and the 3D landmarks, as a landmark model's depth turns a limb round for a while) with the left leg
-    mirrored in depth in six frames of twelve: fitted from that start the clip stays near that local minimum (how
-    near depends on the path the steps take: 78 mm off at worst before e0f5fbc, 31 mm since, 20 on average); from
-    the start chosen over time it comes back within centimetres everywhere, several times closer on average."""
+    mirrored in depth in six frames of twelve: fitted from that start the clip stays near that local minimum
+    (centimetres to decimetres off, as the steps' path goes); from the start chosen over time it comes back within
+    centimetres everywhere, several times closer on average."""
     pose, betas, transl, keypoints, directions = synthetic_clip(12)
     start = start_of(pose, transl, 0.003).replace(betas=jnp.broadcast_to(jnp.asarray(betas, jnp.float32), (12, 10)))
     full = jax.vmap(lambda p: p.full_pose())(start)
