@@ -340,9 +340,16 @@ def _spread(block: Float[Array, "... 27 27"], hand: int) -> Float[Array, "... 69
     return jnp.swapaxes(place, 0, 1) @ block @ place
 
 
+def _products(a: Float[Array, "... n k"], b: Float[Array, "... k m"]) -> Float[Array, "... n m"]:
+    """``a @ b`` of stacks of small matrices, written out as sums of products: as batched dots of three batch
+    dimensions (a stack, a window's frames, the windows solved together) XLA's GPU compiler fails on some of them
+    (jax 0.11.2: the HLO verifier finds the dot's shape permuted)."""
+    return jnp.sum(a[..., :, :, None] * b[..., None, :, :], -2)
+
+
 def _gram(j: Float[Array, "K 3 m"], metric: Float[Array, "K 3 3"]) -> Float[Array, "m m"]:
     """``sum_k J_k^T metric_k J_k``."""
-    return jnp.einsum("kci,kcj->ij", j, metric @ j)
+    return jnp.einsum("kci,kcj->ij", j, _products(metric, j))
 
 
 def _frame_blocks(km, lin, image, motion, bone_metric, axis_weight, to_theta, lost):
@@ -357,7 +364,7 @@ def _frame_blocks(km, lin, image, motion, bone_metric, axis_weight, to_theta, lo
     body = jnp.concatenate([jnp.moveaxis(jacobian[:, :, :BODY], 0, 1).reshape(k, 3, 3 * BODY),
                             jnp.broadcast_to(jnp.eye(3, dtype=jacobian.dtype), (k, 3, 3))], -1)  # (K, 3, 69)
     metric = image + motion
-    theta = jnp.swapaxes(to_theta, -1, -2) @ (axis_weight[..., None] * to_theta)  # (55, 3, 3)
+    theta = _products(jnp.swapaxes(to_theta, -1, -2), axis_weight[..., None] * to_theta)  # (55, 3, 3)
     a, b = (np.asarray(side) for side in zip(*BODY_BONES))
     dense = (_gram(body[:25], metric[:25]) + _gram(body[b] - body[a], bone_metric[:len(BODY_BONES)])
              + jax.scipy.linalg.block_diag(*theta[:BODY], lost * jnp.eye(3, dtype=body.dtype)))
@@ -395,7 +402,7 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     zero, one = jnp.zeros_like(z), jnp.ones_like(z)
     projection = (data.focal_length / z)[..., None, None] * jnp.stack(
         [jnp.stack([one, zero, -x[..., 0] / z], -1), jnp.stack([zero, one, -x[..., 1] / z], -1)], -2)  # (T,K,2,3)
-    image = (irls / data.sigma**2)[..., None, None] * jnp.swapaxes(projection, -1, -2) @ projection
+    image = (irls / data.sigma**2)[..., None, None] * _products(jnp.swapaxes(projection, -1, -2), projection)
     rows = motion_rows(data)  # (T, K)
     zero = jnp.zeros_like(rows[:1])
     after = jnp.concatenate([rows[1:], zero])  # the next frame's row
@@ -503,8 +510,15 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
     Pure: works under `jax.jit` (one program per clip length) and `jax.grad`; gradients with respect to the
     observations come from implicit differentiation of the optimum (``adjoint`` None, `optimistix.ImplicitAdjoint`:
     it materialises the Jacobian of the optimality condition, fine for short clips;
-    ``optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps instead)."""
-    config = config or ClipConfig()
+    ``optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps instead). Matrix products in full float32
+    on every device, as `fitting.fit_one`'s."""
+    with jax.default_matmul_precision("highest"):
+        return _fit_clip(model, keypoints, init, focal_length, principal_point, fps, keypoint_sigma_px, directions,
+                         direction_weight, found, fit_betas, config or ClipConfig(), adjoint)
+
+
+def _fit_clip(model, keypoints, init, focal_length, principal_point, fps, keypoint_sigma_px, directions,
+              direction_weight, found, fit_betas, config, adjoint) -> ClipResult:
     start, data = clip_problem(model, keypoints, init, focal_length=focal_length, principal_point=principal_point,
                                fps=fps, keypoint_sigma_px=keypoint_sigma_px, directions=directions,
                                direction_weight=direction_weight, found=found, fit_betas=fit_betas)

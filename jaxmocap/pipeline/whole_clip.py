@@ -8,6 +8,7 @@ stored in, in time linear in the run's length and memory flat (but for the choic
 """
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -53,6 +54,8 @@ MARGIN = 8
 # acceleration joins two runs.
 SHAPE_FRAMES = 32
 SHAPE_RUNS = 4
+# Windows solved together on an accelerator (`windows_at_once`).
+ACCELERATOR_WINDOWS = 16
 HAND_SLICES = (slice(25, 46), slice(46, 67))
 
 
@@ -122,7 +125,21 @@ def bone_directions(track: Track, lens) -> tuple[np.ndarray, np.ndarray]:
             np.where(found, np.concatenate(weights, 1), 0.0).astype(np.float32))
 
 
-@disk_jit(static_argnames=("fit_betas", "config"))
+def _windows_of(fun):
+    """``fun`` over windows, their arrays (but for the lens and frame rate) leading with a window axis; matrix
+    products in full float32 on every device, as the clip fit's."""
+    def over_windows(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
+                     fit_betas: bool, config: ClipConfig):
+        def one(k, s, g, d, w, f):
+            return fun(model, k, s, focal_length, principal_point, fps, g, d, w, f, fit_betas=fit_betas, config=config)
+
+        with jax.default_matmul_precision("highest"):
+            return jax.vmap(one)(keypoints, start, sigma, directions, weight, found)
+
+    return disk_jit(functools.wraps(fun)(over_windows), static_argnames=("fit_betas", "config"))
+
+
+@_windows_of
 def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
          fit_betas: bool, config: ClipConfig):
     return fit_clip(model, keypoints, start, focal_length=focal_length, principal_point=principal_point, fps=fps,
@@ -130,7 +147,7 @@ def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, dir
                     fit_betas=fit_betas, config=config)
 
 
-@disk_jit(static_argnames=("fit_betas", "config"))
+@_windows_of
 def _hypotheses(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
                 fit_betas: bool, config: ClipConfig):
     y, data = clip_problem(model, keypoints, start, focal_length=focal_length, principal_point=principal_point,
@@ -163,6 +180,13 @@ def blocks(count: int):
     the last frame, so that one program serves every block) and how many of them are its own."""
     for first in range(0, count, WINDOW):
         yield np.minimum(np.arange(first, first + WINDOW), count - 1), min(WINDOW, count - first)
+
+
+def windows_at_once() -> int:
+    """Windows solved together, as one batched program: one on a CPU, where a batch costs the sum of its windows'
+    arithmetic and waits for its slowest; `ACCELERATOR_WINDOWS` on an accelerator, where a step's time is set by
+    its launches, not its arithmetic, so that a batch of windows takes about one window's time."""
+    return 1 if jax.default_backend() == "cpu" else ACCELERATOR_WINDOWS
 
 
 def with_start(model: smplx_jax.BodyModel, track: Track, lens) -> Track:
@@ -250,13 +274,13 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
     focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
 
     def solve(fit, frames, found, rate, betas=None):
-        """Frames ``frames`` (indices, padded with repeats) as one clip, the shape ``betas`` held (None: fitted):
-        ``fit`` is `_fit` or `_hypotheses`."""
+        """Windows of frames ``frames`` ``(W, F)`` (indices, padded with repeats), each as one clip, the shape
+        ``betas`` held (None: fitted): ``fit`` is `_fit` or `_hypotheses`."""
         pick = jax.tree.map(lambda a: np.asarray(a)[frames], start)
         if betas is not None:
             pick = pick.replace(betas=np.broadcast_to(betas, pick.betas.shape).astype(np.float32))
-        return fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
-                   directions[frames], weight[frames], found, fit_betas=betas is None, config=config)
+        return jax.device_get(fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
+                                  directions[frames], weight[frames], found, fit_betas=betas is None, config=config))
 
     def windows():
         """Each window's frames (padded at the ends with repeats), where they are in the track, which it keeps."""
@@ -267,16 +291,22 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
 
     def in_windows(fit, betas, keep=lambda result, frames: result, told=lambda frames: None):
         """What ``keep`` takes of ``fit``'s results and the window's frames (frames leading) over the track, window
-        by window, each window's frames ``told``."""
-        parts = []
-        for frames, inside, core in windows():
-            result = keep(solve(fit, frames, inside & valid[frames], fps or 0.0, betas), frames)
-            parts.append(jax.tree.map(lambda a: np.asarray(a)[core], result))
-            told(int(core.sum()))
+        by window (`windows_at_once` of them solved together, placed by frame number; the last group padded with
+        its last window), each window's frames ``told``."""
+        spans, parts, at_once = list(windows()), [], windows_at_once()
+        for first in range(0, len(spans), at_once):
+            group = spans[first:first + at_once]
+            frames, inside, core = (np.stack(a) for a in zip(*group + group[-1:] * (at_once - len(group))))
+            results = solve(fit, frames, inside & valid[frames], fps or 0.0, betas)
+            for w in range(len(group)):
+                result = keep(jax.tree.map(lambda a: a[w], results), frames[w])
+                parts.append(jax.tree.map(lambda a: np.asarray(a)[core[w]], result))
+                told(int(core[w].sum()))
         return jax.tree.map(lambda *a: np.concatenate(a), *parts)
 
-    shaped = solve(_fit, *shape_frames(valid, bool(fps)), fps or 0.0)  # one shape, fitted on `shape_frames`
-    shape = np.asarray(shaped.params.betas[0])
+    frames, found = shape_frames(valid, bool(fps))
+    shaped = solve(_fit, frames[None], found[None], fps or 0.0)  # one shape, fitted on `shape_frames`
+    shape = np.asarray(shaped.params.betas[0, 0])
     if fps:  # each limb's depth chosen over the whole track (`clip_start`)
         unary, triple, hypotheses = in_windows(_hypotheses, shape)
         codes = _limb_codes(unary, triple)
@@ -291,4 +321,4 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
     params, (scale, trans), converged = in_windows(_fit, shape, with_cameras, progress or (lambda frames: None))
     finite = np.all(np.isfinite(np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(params))), (1, 2))
     return FittedClip(Bodies(params, scale, trans, valid & finite),
-                      converged & bool(shaped.converged))
+                      converged & bool(shaped.converged[0]))
