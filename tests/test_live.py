@@ -2,6 +2,7 @@
 the bundled clip played as live (every frame, or in real time and slowed down on purpose), the stream parsed
 back, agreement with the offline run, and the command's exits (Ctrl-C, a camera that cannot be opened)."""
 
+import dataclasses
 import ipaddress
 import json
 import os
@@ -25,7 +26,11 @@ from bench import live as live_bench
 from conftest import assert_kept_for_the_next_process, assert_one_body, cli_as_from_a_terminal
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import MediaError
-from jaxmocap.live import LiveConfig, causal, live, params_from_message
+from jaxmocap.integrate import synthetic
+from jaxmocap.integrate.clip import points_3d
+from jaxmocap.integrate.inverse_kinematics import BLAZEPOSE_TO_SMPLX
+from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
+from jaxmocap.live import LiveConfig, LiveSettings, causal, live, params_from_message
 from jaxmocap.live.causal import CausalSolver
 from jaxmocap.live.mailbox import Closed, Mailbox
 from jaxmocap.live.one_euro import OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
@@ -238,6 +243,52 @@ def test_the_solve_runs_on_the_host_cpu():
     state, _ = solver.people[0]
     for leaf in jax.tree.leaves((solver.models, solver.lens, state)):
         assert leaf.committed and leaf.devices() == {jax.devices("cpu")[0]}
+
+
+def synthetic_observations(model, frames: int, fps: float, lens):
+    """`synthetic.make_clip`'s body as the detector would give it: OpenPose keypoints with 2 px of noise, BlazePose's
+    world landmarks (the body's joints about its hips, 1 cm of noise), no hands."""
+    clip = synthetic.make_clip(model, frames, seed=1, focal_length=lens[0], principal_point=lens[1], fps=fps)
+    rng = np.random.default_rng(1)
+    keypoints = clip.keypoints.astype(np.float32)
+    keypoints[..., :2] += rng.normal(scale=2.0, size=keypoints[..., :2].shape)
+    keypoints[:, 25:, 2] = 0.0
+    betas = jnp.asarray(clip.betas, jnp.float32)
+    landmarks, joints = list(BLAZEPOSE_TO_SMPLX), list(BLAZEPOSE_TO_SMPLX.values())
+    km = keypoint_model(model, joints)
+    world = np.zeros((frames, 33, 4), np.float32)
+    points = np.asarray(jax.vmap(lambda p: keypoints_cm(km, p, betas).T)(jnp.asarray(clip.pose, jnp.float32)))
+    world[:, landmarks, :3] = points + rng.normal(scale=0.01, size=points.shape)
+    world[..., :3] -= world[:, [23, 24], :3].mean(1, keepdims=True)
+    world[:, landmarks, 3] = 1.0
+    nothing = _no_one(1)
+    observations = [Observations(keypoints[t:t + 1], world[t:t + 1], nothing["hands_world"], nothing["hands_conf"],
+                                 nothing["body_box"], nothing["hand_boxes"], np.ones(1, bool)) for t in range(frames)]
+    return observations
+
+
+def test_each_frame_is_solved_with_the_ones_before_it():
+    """Live solves each frame in a window with the frames before it (the clip fit's motion term, in m/s^2 at the
+    frame rate): on a synthetic clip its 3D keypoints' accelerations are well below those of the same frames
+    solved without the motion term, and both lie on the keypoints within their 2 px of noise."""
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    fps, lens = 30.0, lens_of((1920, 1080))
+    observations = synthetic_observations(model, 30, fps, lens)
+    keypoints = np.concatenate([obs.keypoints for obs in observations])
+    alone = dataclasses.replace(LiveSettings().fit, acceleration_sigma=1e9, angular_acceleration_sigma=1e9)
+    results = {}
+    for name, settings in (("window", LiveSettings()), ("alone", LiveSettings(fit=alone))):
+        solver = CausalSolver(model, lens, settings)
+        solved = [solver({0: obs}, t / fps)[0] for t, obs in enumerate(observations)]
+        params = jax.tree.map(lambda *a: jnp.asarray(np.stack(a)), *[s.params for s in solved])
+        x = np.asarray(jax.vmap(lambda p: points_3d(solver.models.openpose, p.full_pose(), p.betas, p.transl))(
+            params))[:, :25]
+        pixels = lens[0] * x[..., :2] / x[..., 2:] + lens[1]
+        results[name] = (np.median(np.linalg.norm(x[:-2] - 2 * x[1:-1] + x[2:], axis=-1)) * fps**2,
+                         np.median(np.linalg.norm(pixels - keypoints[:, :25, :2], axis=-1)))
+    (jitter, pixels), (jitter_alone, pixels_alone) = results["window"], results["alone"]
+    assert jitter < 0.75 * jitter_alone, results
+    assert pixels < 2.5 and pixels_alone < 2.5, results
 
 
 def test_live_agrees_with_the_offline_run(played, tmp_path):

@@ -463,13 +463,14 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     return ClipBlocks(body, (hand(0), hand(1)), jnp.where(data.fit_betas > 0, shape, 1.0))
 
 
-def clip_problem(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPLXParams, *,
+def clip_problem(model: BodyModel | KeypointModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPLXParams, *,
                  focal_length: float | Float[ArrayLike, ""], principal_point: Float[ArrayLike, "2"],
                  fps: float | Float[ArrayLike, ""], keypoint_sigma_px: Float[ArrayLike, "T 67"],
                  directions: Float[ArrayLike, "T N 3"] | None = None,
                  direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
-                 fit_betas: bool = True) -> tuple[ClipUnknowns, ClipData]:
-    """The start and the data of `fit_clip`'s problem (its arguments), for `residuals` and `preconditioner`."""
+                 fit_betas: bool | Bool[ArrayLike, ""] = True) -> tuple[ClipUnknowns, ClipData]:
+    """The start and the data of `fit_clip`'s problem (its arguments; ``model`` or its OpenPose keypoint model,
+    `fitting.openpose_keypoint_model`, already built), for `residuals`, `preconditioner` and `solve_clip`."""
     dtype = init.global_orient.dtype
     t = keypoints.shape[0]
     keypoints = jnp.asarray(keypoints)
@@ -484,11 +485,12 @@ def clip_problem(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: 
     found_f = found.astype(dtype)
     betas0 = jnp.sum(found_f[:, None] * init.betas, 0) / jnp.maximum(jnp.sum(found_f), 1.0)
     start = ClipUnknowns(pose[:, list(SOLVED_JOINTS)], init.transl.astype(dtype), betas0)
-    data = ClipData(openpose_keypoint_model(model), target, confidence, jnp.asarray(keypoint_sigma_px, dtype),
+    km = model if isinstance(model, KeypointModel) else openpose_keypoint_model(model)
+    data = ClipData(km, target, confidence, jnp.asarray(keypoint_sigma_px, dtype),
                     jnp.asarray(directions, dtype), jnp.asarray(direction_weight, dtype), found_f, start,
                     pose[:, list(FIXED_JOINTS)], jnp.asarray(focal_length, dtype),
                     jnp.asarray(principal_point, dtype), jnp.asarray(fps, dtype),
-                    jnp.asarray(1.0 if fit_betas else 0.0, dtype))
+                    jnp.asarray(fit_betas, dtype))
     return start, data
 
 
@@ -512,29 +514,34 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
     it materialises the Jacobian of the optimality condition, fine for short clips;
     ``optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps instead). Matrix products in full float32
     on every device, as `fitting.fit_one`'s."""
+    problem = clip_problem(model, keypoints, init, focal_length=focal_length, principal_point=principal_point, fps=fps,
+                           keypoint_sigma_px=keypoint_sigma_px, directions=directions,
+                           direction_weight=direction_weight, found=found, fit_betas=fit_betas)
+    return solve_clip(*problem, shape_moves=fit_betas, num_expression=model.num_expression, config=config,
+                      adjoint=adjoint)
+
+
+def solve_clip(start: ClipUnknowns, data: ClipData, *, shape_moves: bool, num_expression: int,
+               config: ClipConfig | None = None, adjoint: optx.AbstractAdjoint | None = None) -> ClipResult:
+    """`fit_clip` of the problem `clip_problem` gave (``num_expression`` the model's): what a compiled caller that
+    holds the keypoint model calls. ``shape_moves`` False: the solver never moves the shape (one unknown fewer);
+    True: it solves for it where ``data.fit_betas`` says (a traced choice)."""
+    config = config or ClipConfig()
+    adjoint = optx.ImplicitAdjoint() if adjoint is None else adjoint
     with jax.default_matmul_precision("highest"):
-        return _fit_clip(model, keypoints, init, focal_length, principal_point, fps, keypoint_sigma_px, directions,
-                         direction_weight, found, fit_betas, config or ClipConfig(), adjoint)
-
-
-def _fit_clip(model, keypoints, init, focal_length, principal_point, fps, keypoint_sigma_px, directions,
-              direction_weight, found, fit_betas, config, adjoint) -> ClipResult:
-    start, data = clip_problem(model, keypoints, init, focal_length=focal_length, principal_point=principal_point,
-                               fps=fps, keypoint_sigma_px=keypoint_sigma_px, directions=directions,
-                               direction_weight=direction_weight, found=found, fit_betas=fit_betas)
-    solver = ClipLevenbergMarquardt(tolerance=config.tolerance_per_frame * jnp.maximum(jnp.sum(data.found), 1.0),
-                                    fit_shared=fit_betas, cg_iterations=config.cg_iterations)
-    cost = jax.tree_util.Partial(residuals, config=config)
-    options = dict(preconditioner=jax.tree_util.Partial(preconditioner, config=config), reweighted=cost)
-    solution = optx.least_squares(cost, solver, start, data, options=options, max_steps=config.iterations,
-                                  throw=False, adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
-    y = solution.value
-    betas = jnp.where(fit_betas, y.betas, start.betas)
-    params = jax.vmap(params_of, in_axes=(0, None, None))(
-        jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose), betas, model.num_expression)
-    params = params.replace(transl=y.transl)
-    return ClipResult(params, solution.result == optx.RESULTS.successful, solution.stats["num_steps"],
-                      reprojection_errors(y._replace(betas=betas), data))
+        solver = ClipLevenbergMarquardt(
+            tolerance=config.tolerance_per_frame * jnp.maximum(jnp.sum(data.found), 1.0),
+            fit_shared=shape_moves, cg_iterations=config.cg_iterations)
+        cost = jax.tree_util.Partial(residuals, config=config)
+        options = dict(preconditioner=jax.tree_util.Partial(preconditioner, config=config), reweighted=cost)
+        solution = optx.least_squares(cost, solver, start, data, options=options, max_steps=config.iterations,
+                                      throw=False, adjoint=adjoint)
+        y = solution.value
+        betas = shape_of(y, data)
+        params = jax.vmap(params_of, in_axes=(0, None, None))(
+            jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose), betas, num_expression)
+        return ClipResult(params.replace(transl=y.transl), solution.result == optx.RESULTS.successful,
+                          solution.stats["num_steps"], reprojection_errors(y._replace(betas=betas), data))
 
 
 def reprojection_errors(y: ClipUnknowns, data: ClipData) -> Float[Array, "T"]:

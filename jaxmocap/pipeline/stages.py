@@ -16,7 +16,7 @@ import numpy as np
 import smplx_jax
 from jaxmocap.detect import Detector
 from jaxmocap.detect.identities import IdentityTracker
-from jaxmocap.integrate import FitConfig, body_from_blazepose, fitted_motion, hand_into_body
+from jaxmocap.integrate import body_from_blazepose, fitted_motion, hand_into_body
 from jaxmocap.integrate.camera import default_focal_length, weak_perspective_from_points
 from jaxmocap.integrate.fitting import openpose_keypoint_model, params_from_full_pose
 from jaxmocap.integrate.keypoints import keypoints_cm
@@ -59,7 +59,7 @@ def initial_poses(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SM
 
 
 @jax.jit
-def _placed(km, params, keypoints, focal_length, principal_point):
+def placed(km, params, keypoints, focal_length, principal_point):
     """Each pose's translation in the camera frame: the depth and offset at which its keypoints' spread and
     centre match the 2D keypoints' (`weak_perspective_from_points`, as a pinhole camera sees the body's origin),
     and that camera."""
@@ -74,10 +74,10 @@ def _placed(km, params, keypoints, focal_length, principal_point):
 
 def placed_bodies(model: smplx_jax.BodyModel, params: smplx_jax.SMPLXParams, keypoints_2d: np.ndarray, lens: Lens,
                   valid: np.ndarray) -> Bodies:
-    """Each frame's pose (batched ``params``) placed in the pinhole camera ``lens`` (`_placed`) on its 2D keypoints
+    """Each frame's pose (batched ``params``) placed in the pinhole camera ``lens`` (`placed`) on its 2D keypoints
     ``(T, 67, 3)``: a start for the clip fit."""
-    params, scale, trans = _placed(openpose_keypoint_model(model), params, np.asarray(keypoints_2d, np.float32),
-                                   np.float32(lens[0]), np.asarray(lens[1], np.float32))
+    params, scale, trans = placed(openpose_keypoint_model(model), params, np.asarray(keypoints_2d, np.float32),
+                                  np.float32(lens[0]), np.asarray(lens[1], np.float32))
     return Bodies(jax.tree.map(np.asarray, params), np.asarray(scale), np.asarray(trans), np.asarray(valid))
 
 
@@ -85,12 +85,6 @@ def initial_bodies(model: smplx_jax.BodyModel, obs: Observations, lens: Lens) ->
     """The clip fit's start for each frame: `initial_poses` placed in the pinhole camera ``lens``; valid where the
     person was found."""
     return placed_bodies(model, initial_poses(model, obs), obs.keypoints, lens, obs.found)
-
-
-# Live capture's fit of each frame from its IK start (`live.causal`): the start already holds BlazePose's 3D (depth,
-# twists) that the 2D keypoints do not see, so the prior keeps the fit near it (0.1 m/rad; the generic fit's 0.02
-# lets depth drift: 3D error up on real footage, docs/BENCHMARKS.md).
-FIT_FROM_IK = FitConfig(prior_body=0.1, prior_finger_hinge=0.05, prior_finger_range=0.2, linear_solver="cg")
 
 
 def lens_of(image_size: tuple[int, int], focal_length: float | None = None) -> Lens:

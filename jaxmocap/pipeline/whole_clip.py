@@ -95,17 +95,17 @@ def _unit(vectors, weight):
     return np.where(ok[..., None], vectors / np.maximum(length, 1e-6), 0.0), np.where(ok, weight, 0.0)
 
 
-def bone_directions(track: Track, lens) -> tuple[np.ndarray, np.ndarray]:
-    """The directions of `clip.BONES` ``(T, N, 3)`` that the 3D landmarks give, in the camera's axes (each set
-    turned by `_ray_rotations` at its body's or hand's pixel), and their confidence ``(T, N)``: a body bone's the
-    lower visibility of its ends, a hand bone's the hand's presence; 0 where not seen."""
-    keypoints = np.asarray(track.keypoints_2d, np.float64)
+def bone_directions(obs: Observations, lens) -> tuple[np.ndarray, np.ndarray]:
+    """The directions of `clip.BONES` ``(T, N, 3)`` that the 3D landmarks of ``obs`` give, in the camera's axes
+    (each set turned by `_ray_rotations` at its body's or hand's pixel), and their confidence ``(T, N)``: a body
+    bone's the lower visibility of its ends, a hand bone's the hand's presence; 0 where not seen."""
+    keypoints = np.asarray(obs.keypoints, np.float64)
     seen = keypoints[:, :25, 2] > 0
     centre = np.where(keypoints[:, 8:9, 2] > 0, keypoints[:, 8, :2],
                       np.sum(np.where(seen[..., None], keypoints[:, :25, :2], 0.0), 1)
                       / np.maximum(seen.sum(1), 1)[:, None])
     turn = _ray_rotations(centre, lens)
-    world = np.asarray(track.body_world, np.float64)
+    world = np.asarray(obs.body_world, np.float64)
     a, b = (np.asarray([BLAZEPOSE_OF_BODY25[k] for k in side]) for side in zip(*BODY_BONES))
     body, body_weight = _unit(np.einsum("tij,tnj->tni", turn, world[:, b, :3] - world[:, a, :3]),
                               np.minimum(world[:, a, 3], world[:, b, 3]))
@@ -113,14 +113,14 @@ def bone_directions(track: Track, lens) -> tuple[np.ndarray, np.ndarray]:
     for side, part in enumerate(HAND_SLICES):
         wrist = keypoints[:, part][:, 0]
         hand_turn = np.where((wrist[:, 2] > 0)[:, None, None], _ray_rotations(wrist[:, :2], lens), turn)
-        hand = np.asarray(track.hands_world[:, side], np.float64)
+        hand = np.asarray(obs.hands_world[:, side], np.float64)
         a, b = (np.asarray(ends) for ends in zip(*HAND_BONES))
         unit, weight = _unit(np.einsum("tij,tnj->tni", hand_turn, hand[:, b] - hand[:, a]),
-                             np.broadcast_to(np.asarray(track.hands_conf[:, side], np.float64)[:, None],
+                             np.broadcast_to(np.asarray(obs.hands_conf[:, side], np.float64)[:, None],
                                              (len(hand), len(a))))
         parts.append(unit)
         weights.append(weight)
-    found = np.asarray(track.found)[:, None]
+    found = np.asarray(obs.found)[:, None]
     return (np.concatenate(parts, 1).astype(np.float32),
             np.where(found, np.concatenate(weights, 1), 0.0).astype(np.float32))
 
@@ -159,15 +159,15 @@ def _hypotheses(model, keypoints, start, focal_length, principal_point, fps, sig
 _limb_codes = jax.jit(limb_codes)
 
 
-@jax.jit
-def _weak_cameras(km, params, focal_length, principal_point, confidence):
-    """The weak-perspective camera closest to the pinhole's projection of each frame's keypoints."""
-    def one(p, conf):
-        x = points_3d(km, p.full_pose(), p.betas, p.transl)
-        pixels = focal_length * x[:, :2] / x[:, 2:] + principal_point
-        return weak_perspective_least_squares(x[:, :2], pixels, jnp.where(conf > 0, 1.0, 0.1))
+def weak_camera(km, params: smplx_jax.SMPLXParams, focal_length, principal_point, confidence: Float[ArrayLike, "67"]):
+    """The weak-perspective camera (scale, translation) closest to the pinhole's projection of one frame's
+    keypoints, those with ``confidence`` > 0 weighing ten times the others."""
+    x = points_3d(km, params.full_pose(), params.betas, params.transl)
+    pixels = focal_length * x[:, :2] / x[:, 2:] + principal_point
+    return weak_perspective_least_squares(x[:, :2], pixels, jnp.where(confidence > 0, 1.0, 0.1))
 
-    return jax.vmap(one)(params, confidence)
+
+_weak_cameras = jax.jit(jax.vmap(weak_camera, in_axes=(None, 0, None, None, 0)))
 
 
 def _observations(track: Track) -> Observations:
@@ -246,7 +246,7 @@ def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | No
     unrelated images, no motion between them). Valid where the start was."""
     if fps:
         track = with_hand_gaps_filled(track, round(HAND_GAP_SECONDS * fps))
-    directions, weight = bone_directions(track, lens)
+    directions, weight = bone_directions(_observations(track), lens)
     return fitted_clip(model, track.keypoints_2d, track.bodies.params, track.found & track.bodies.valid, lens, fps,
                        directions, weight, config).bodies
 
