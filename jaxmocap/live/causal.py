@@ -118,7 +118,8 @@ def step(models: Models, obs: tuple, state: PersonState, fresh: Bool[Array, ""],
     """One person's frame: ``obs`` = (BlazePose world landmarks (33, 4), hand world landmarks (2, 21, 3), hand
     presence (2,), OpenPose keypoints (67, 3), their noise in pixels (67,), the bones' observed directions (N, 3)
     and confidence (N,): `whole_clip.keypoint_noise_px`, `whole_clip.bone_directions`); ``fresh``: nothing before
-    this frame counts; ``dt``: seconds since the person's last frame; ``lens``: (focal length, principal point)."""
+    this frame counts; ``dt``: seconds since the person's last frame (the window's frame rate is ``1 / dt``);
+    ``lens``: (focal length, principal point)."""
     world, hands_world, hands_conf, keypoints, sigma, directions, direction_weight = obs
     focal, centre = lens
     ik_config = IKConfig(iterations=settings.ik_iterations)
@@ -179,8 +180,8 @@ class CausalSolver:
                                                        constants.RIGHT_HAND21_FROM_SMPLX)))
         self.models = jax.device_put(Models(keypoint_model(model, BLAZEPOSE_JOINTS), hands,
                                             openpose_keypoint_model(model)), self.device)
-        self.pinhole = (float(lens[0]), np.asarray(lens[1], np.float32))
-        self.lens = jax.device_put((np.float32(lens[0]), np.asarray(lens[1], np.float32)), self.device)
+        self.pinhole = (np.float32(lens[0]), np.asarray(lens[1], np.float32))
+        self.lens = jax.device_put(self.pinhole, self.device)
         self.num_betas, self.num_expression = model.num_betas, model.num_expression
         self.settings = settings
         self.people: dict[int, tuple[PersonState, float]] = {}  # by identity: state, time last solved
