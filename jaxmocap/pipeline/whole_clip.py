@@ -133,8 +133,11 @@ def _windows_of(fun):
         def one(k, s, g, d, w, f):
             return fun(model, k, s, focal_length, principal_point, fps, g, d, w, f, fit_betas=fit_betas, config=config)
 
+        windows = (keypoints, start, sigma, directions, weight, found)
         with jax.default_matmul_precision("highest"):
-            return jax.vmap(one)(keypoints, start, sigma, directions, weight, found)
+            if keypoints.shape[0] == 1:  # unbatched: a vmapped solve's loop selects every value it carries each step
+                return jax.tree.map(lambda a: a[None], one(*jax.tree.map(lambda a: a[0], windows)))
+            return jax.vmap(one)(*windows)
 
     return disk_jit(functools.wraps(fun)(over_windows), static_argnames=("fit_betas", "config"))
 
