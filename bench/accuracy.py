@@ -4,7 +4,7 @@ landmarks the fit starts from), stage by stage: BlazePose, the clip fit's start 
 ``jaxmocap run`` writes).
 
     python bench/accuracy.py [--views cam01 cam03] [--variants all | mirror rotate90 roll15 roll30 crop half 30fps pan]
-        [--landmarks heavy full lite] [--out bench/results] [--sheet docs/accuracy_worst_frames.png]
+        [--landmarks heavy full lite] [--chunk N] [--out bench/results] [--sheet docs/accuracy_worst_frames.png]
         (or: jaxmocap bench --only accuracy)
 
 Variants (`--variants`) stand in for the views we don't have: each view's video as another camera would have given
@@ -213,11 +213,12 @@ class Stages:
     identities: int  # the people the run found (one in this take)
 
 
-def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str = "heavy") -> Stages:
-    """``jaxmocap run`` on ``video`` (frames up to ``end``; its motion.npz), and the stages before the clip fit from
-    what the run itself observed, chunk by chunk (`run`'s ``observed``): BlazePose's world landmarks (left and
-    right put back where the detector exchanged them, as the fit takes them) and the fit's start. The take has one
-    person: each frame's is the lowest id found."""
+def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str = "heavy",
+               chunk_size: int | None = None) -> Stages:
+    """``jaxmocap run`` on ``video`` (frames up to ``end``, ``chunk_size`` frames a chunk or the run's default; its
+    motion.npz), and the stages before the clip fit from what the run itself observed, chunk by chunk (`run`'s
+    ``observed``): BlazePose's world landmarks (left and right put back where the detector exchanged them, as the
+    fit takes them) and the fit's start. The take has one person: each frame's is the lowest id found."""
     import jax
 
     import smplx_jax
@@ -237,7 +238,9 @@ def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str =
             part = frames_where(obs.found, (obs.body_world[:, BLAZEPOSE_LIMB_LANDMARKS, :3], track), part)
         chunks.append(part)
 
-    run(RunConfig(video, end=end, overlay=False, progress=False, landmarks=landmarks), work, observed=observed)
+    chunking = {} if chunk_size is None else {"chunk_size": chunk_size}
+    run(RunConfig(video, end=end, overlay=False, progress=False, landmarks=landmarks, **chunking), work,
+        observed=observed)
     motion = read_motion(work / "motion.npz")
     blazepose, track = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
     start = with_start(model, track, lens(motion)).bodies
@@ -353,6 +356,7 @@ def main():
     parser.add_argument("--landmarks", nargs="+", choices=tuple(LANDMARK_MODELS), default=["heavy"],
                         help="BlazePose landmark models, each case run with each (default: heavy, the run's)")
     parser.add_argument("--sheet", type=Path, default=None, help="contact sheet PNG of the worst frames")
+    parser.add_argument("--chunk", type=int, default=None, help="frames per chunk of each run (default: the run's)")
     args = parser.parse_args()
     import tempfile
 
@@ -370,7 +374,7 @@ def main():
                     work = Path(work)
                     source = video if kind is None else write_variant(video, kind, work / "variant.mp4",
                                                                       person_x[view])
-                    stages = run_stages(source, work / "run", landmarks=model)
+                    stages = run_stages(source, work / "run", landmarks=model, chunk_size=args.chunk)
                 results[model][name] = report_view(name, stages, variant_reference(reference, kind)) | {
                     "seconds": time.perf_counter() - begin}
                 print(f"{name} [{model}]: {time.perf_counter() - begin:.0f} s", flush=True)
