@@ -3,6 +3,7 @@ interrupted on purpose."""
 
 import contextlib
 import functools
+import itertools
 import os
 import shutil
 import sys
@@ -138,6 +139,36 @@ def interrupted_at_chunk(monkeypatch, index: int, stop=_ctrl_c):
         yield
     finally:
         monkeypatch.setattr(job, "solve_chunk", solve)
+
+
+@contextlib.contextmanager
+def frames_alive_at_each_chunk(monkeypatch, job):
+    """Within the block, a list with, as ``job`` (`pipeline.job` or `pipeline.hands_job`) starts reading each chunk
+    of frames, how many of the previous chunk's frames are still held anywhere (weak references, after a
+    collection): a run must hold one chunk of decoded frames at a time."""
+    import gc
+    import weakref
+
+    batches, alive, previous = job.frame_batches, [], []
+
+    def watched(frames, size, chrono):
+        def counted():
+            for count, (index, frame) in zip(itertools.count(), frames):
+                if count % size == 0:
+                    gc.collect()
+                    alive.append(sum(ref() is not None for ref in previous))
+                    previous.clear()
+                previous.append(weakref.ref(frame))
+                yield index, frame
+                del frame
+
+        return batches(counted(), size, chrono)
+
+    monkeypatch.setattr(job, "frame_batches", watched)
+    try:
+        yield alive
+    finally:
+        monkeypatch.setattr(job, "frame_batches", batches)
 
 
 @contextlib.contextmanager

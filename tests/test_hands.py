@@ -14,7 +14,7 @@ import smplx
 import torch
 
 import smplx_jax
-from conftest import assert_kept_for_the_next_process
+from conftest import assert_kept_for_the_next_process, frames_alive_at_each_chunk
 from jaxmocap.cli import main
 from jaxmocap.detect.hand_tracker import HandTracker
 from jaxmocap.hand_motion import hand_meshes, read_hands
@@ -160,6 +160,16 @@ def test_close_up_video_is_tracked_and_fitted_within_3_percent(video):
     assert np.median(errors) <= 0.03 and np.all(np.isfinite(hands["right_hand_pose"]))
     assert len(list((out / "keypoints").glob("*.json"))) == 32 and (out / "overlay.mp4").stat().st_size > 0
     assert_kept_for_the_next_process(hand_fit._fit_batch)
+
+
+def test_a_hands_run_lets_a_chunks_frames_go_before_the_next_are_read(tmp_path, monkeypatch):
+    """As the body's run (tests/test_pipeline.py): one chunk of decoded frames at a time. One frame of the
+    previous chunk is still held here (which holder was not traced); a chunk's worth is what matters."""
+    import jaxmocap.pipeline.hands_job as job
+
+    with frames_alive_at_each_chunk(monkeypatch, job) as alive:
+        run(RunConfig(CLIP, mode="hands", end=32, chunk_size=16, progress=False, overlay=False), tmp_path)
+    assert len(alive) == 2 and max(alive) <= 1, alive
 
 
 def test_interrupted_hands_run_resumes_to_the_same_hands(video, tmp_path, monkeypatch):

@@ -26,6 +26,7 @@ from bench import accuracy
 from conftest import (
     assert_kept_for_the_next_process,
     assert_one_body,
+    frames_alive_at_each_chunk,
     interrupted_at_chunk,
     temporary_files,
 )
@@ -284,6 +285,14 @@ def test_the_motion_does_not_depend_on_the_chunks(result, tmp_path):
     single, chunked = read_motion(report.motion), read_motion(out / "motion.npz")
     for key in ("global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "betas", "transl"):
         np.testing.assert_array_equal(single[key], chunked[key], err_msg=key)
+
+
+def test_a_chunks_frames_are_let_go_before_the_next_are_read(tmp_path, monkeypatch):
+    """A run holds one chunk of decoded frames at a time (128 frames of 1080p video are 800 MB), so that a long
+    video's peak memory is that of a few chunks."""
+    with frames_alive_at_each_chunk(monkeypatch, pipeline_job) as alive:
+        run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
+    assert alive == [0, 0], alive
 
 
 def test_sigterm_stops_a_run_as_ctrl_c_does(tmp_path, monkeypatch, capsys):

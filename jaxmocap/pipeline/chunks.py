@@ -49,11 +49,17 @@ class ChunkStore:
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
-def frame_batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[list]:
-    """Lists of ``size`` items of ``frames`` (the last shorter), their reading timed as ``decode``."""
+def frame_batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[tuple[int, list]]:
+    """Lists of ``size`` items of ``frames`` (the last shorter), numbered from 0, their reading timed as ``decode``.
+    A list is let go before the next is read (a chunk of decoded frames is the run's largest holding: 128 frames of
+    1080p video are 800 MB), so the caller must let it go too, and not number them with `enumerate`, whose last
+    pair lives on while the next item is read."""
+    index = 0
     while True:
         with chrono("decode"):
             batch = list(islice(frames, size))
         if not batch:
             return
-        yield batch
+        yield index, batch
+        del batch
+        index += 1

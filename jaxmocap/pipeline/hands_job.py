@@ -128,7 +128,7 @@ def solved_hand_chunks(config: RunConfig, media, frames, tracker: HandTracker, s
 
     done = 0
     with tqdm(total=media.frame_count, unit="frame", desc="hands", disable=not config.progress) as bar:
-        for index, batch in enumerate(frame_batches(frames, config.chunk_size, chrono)):
+        for index, batch in frame_batches(frames, config.chunk_size, chrono):
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
@@ -138,6 +138,7 @@ def solved_hand_chunks(config: RunConfig, media, frames, tracker: HandTracker, s
                 store.save(index, chunk)
             else:
                 tracker.restore(chunk.tracking)
+            del batch  # its frames go before the next chunk's are read
             yield chunk
             done += len(ids)
             bar.update(len(ids))

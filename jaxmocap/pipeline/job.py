@@ -159,7 +159,7 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
     tracker = None if still else IdentityTracker()
     done, tracking = 0, {}
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
-        for index, batch in enumerate(frame_batches(inputs.frames, config.chunk_size, chrono)):
+        for index, batch in frame_batches(inputs.frames, config.chunk_size, chrono):
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
@@ -170,6 +170,7 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
                 store.save(index, chunk)
             else:
                 _restore(chunk.tracking, detector, tracker)
+            del batch  # its frames go before the next chunk's are read
             tracking = chunk.tracking
             yield chunk
             done += len(ids)
