@@ -300,6 +300,49 @@ def test_fit_recovers_the_hands_it_was_made_from():
         assert error.max() < 0.006 and error.mean() < 0.001, (side, error.max(), error.mean())
 
 
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_a_hands_frames_are_fitted_as_one_with_their_motion(side):
+    """A hand turning and flexing smoothly (60 frames/s), seen with 2 px of noise: fitted as one clip from each
+    frame's own fit, its joints land nearer the truth and accelerate less (the motion term), and it still meets
+    its keypoints. With the motion term cut (``fps`` 0) the joints' accelerations stay the frames' own: checked."""
+    from jaxmocap.integrate.clip import HAND_BONES
+    from jaxmocap.pipeline import hands_job
+    from jaxmocap.pipeline.stages import lens_of
+
+    count, fps = 40, 60.0
+    rng = np.random.default_rng(1)
+    time = np.arange(count) / fps
+    sign = 1.0 if side == "right" else -1.0
+    pose = np.zeros((count, 15, 3), np.float32)
+    pose[:, :12, 2] = sign * (0.6 + 0.4 * np.sin(2 * np.pi * time[:, None] + np.arange(12)))
+    orient = np.stack([np.pi + 0.3 * np.sin(2 * time), 0.4 * np.cos(3 * time), 0.5 * time], 1).astype(np.float32)
+    hand = smplx_jax.hand_model(MODEL, side)
+    truth = np.asarray(hand_meshes(hand, orient, pose).joints)
+    scale = 1500 + 200 * np.sin(time)
+    trans = np.stack([300 + 100 * time, 300 + 20 * np.sin(3 * time)], 1)
+    keypoints = np.concatenate([scale[:, None, None] * truth[..., :2] + trans[:, None], np.ones((count, 21, 1))], -1)
+    keypoints[..., :2] += rng.normal(0, 2.0, (count, 21, 2))
+    world = truth + rng.normal(0, 0.003, truth.shape)
+    own = fit_hands(MODEL, side, world, np.ones((count, 21)), keypoints.astype(np.float32))
+    arrays = {name: np.asarray(getattr(own, name)) for name in hand_fit.HandFit._fields} | {
+        "keypoints_2d": keypoints.astype(np.float32)}
+
+    def joints(a):
+        return np.asarray(hand_meshes(hand, a["global_orient"], a["hand_pose"]).joints)
+
+    def acceleration(x):
+        return np.linalg.norm(x[:-2] - 2 * x[1:-1] + x[2:], axis=-1).mean()
+
+    lens = lens_of((640, 640))
+    fitted = {rate: hands_job.fitted_side(MODEL, lens, rate, side, arrays, world) for rate in (fps, 0.0)}
+    assert fitted[fps]["valid"].all() and len(HAND_BONES) == 20
+    error = {k: np.linalg.norm(joints(a) - truth, axis=-1).mean() for k, a in (("own", arrays), *fitted.items())}
+    moving = {k: acceleration(joints(a)) for k, a in (("own", arrays), *fitted.items())}
+    assert error[fps] < 0.8 * error["own"], error
+    assert moving[fps] < 0.6 * moving["own"] and moving[0.0] > 0.8 * moving["own"], moving
+    assert np.median(fitted[fps]["reprojection_error_px"]) < 3.0
+
+
 def test_hands_export_glTF_only_and_say_so(tmp_path, capsys):
     code = main(["run", str(CLOSEUP), "--mode", "hands", "--export", "bvh", "--out", str(tmp_path), "--quiet"])
     err = capsys.readouterr().err

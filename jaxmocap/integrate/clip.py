@@ -249,10 +249,11 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
     return ClipResiduals(frames, motion_residuals(x, y.pose_rotvecs, motion_rows(data), data.fps, config), shared)
 
 
-def motion_residuals(x: Float[Array, "T 67 3"], pose_rotvecs: Float[Array, "T J 3"], rows: Float[Array, "T 67"],
+def motion_residuals(x: Float[Array, "T K 3"], pose_rotvecs: Float[Array, "T J 3"], rows: Float[Array, "T K"],
                      fps, config: ClipConfig) -> Float[Array, "T M"]:
     """The motion's residuals (module docstring) of the keypoints ``x`` and the body joints' rotations (the first
-    `BODY` of ``pose_rotvecs``), each frame's where ``rows`` (`motion_rows`) says; zero in the first and last."""
+    `BODY` of ``pose_rotvecs``), each frame's where ``rows`` (`motion_rows`) says; zero in the first and last.
+    The angular accelerations count where a frame's first keypoint's row does (the body's, or a hand's own)."""
     t = x.shape[0]
     acceleration = (jnp.concatenate([jnp.zeros_like(x[:1]), x[:-2] - 2 * x[1:-1] + x[2:], jnp.zeros_like(x[:1])])
                     if t > 2 else jnp.zeros_like(x)) * fps**2

@@ -135,8 +135,7 @@ class HandRecorder:
     """Collects each solved frame's hands (`add`) and writes ``hands.npz`` (`write`), with ``frame_index`` and
     ``time_s`` of each row."""
 
-    def __init__(self, model: smplx_jax.BodyModel, model_sha256: str, fps: float, image_size: tuple[int, int]):
-        self.hand_models = {side: smplx_jax.hand_model(model, side) for side in SIDES}
+    def __init__(self, model_sha256: str, fps: float, image_size: tuple[int, int]):
         self.meta = {"fps": np.asarray(fps), "image_size": np.asarray(image_size),
                      "model_sha256": np.asarray(model_sha256)}
         self.frames: list[tuple[int, float]] = []
@@ -157,7 +156,7 @@ class HandRecorder:
             return []
         table = {k: np.asarray([r[k] for r in self.rows]).reshape((len(self.rows),) + shape)
                  for k, shape in COLUMNS.items()}
-        hands = side_arrays(table, len(self.frames), self.hand_models, smooth=False)
+        hands = side_arrays(table, len(self.frames))  # as solved live, each frame causal
         extra = {"frame_index": np.asarray([f for f, _ in self.frames], np.int64),
                  "time_s": np.asarray([t for _, t in self.frames], np.float64)}
         return [write_hands(Path(folder) / "hands.npz", hands | self.meta | extra)]
@@ -176,7 +175,7 @@ class HandSession(Session):
         self.solver = HandSolver(self.model)
         self.detector = HandTracker(static_image_mode=False, max_hands=config.max_hands,
                                     redetect_every=search_interval(self.source.fps))
-        self.recorder = None if config.record is None else HandRecorder(self.model, model_sha256, self.source.fps,
+        self.recorder = None if config.record is None else HandRecorder(model_sha256, self.source.fps,
                                                                          self.source.size)
 
     def warm_up(self) -> None:

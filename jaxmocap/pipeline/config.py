@@ -33,10 +33,10 @@ class RunConfig:
     ``full`` where the one asked for cannot be fetched, `jaxmocap.detect.models.available_landmarks`).
     ``start``/``end``/``stride``: the frames used. ``chunk_size``: frames per resumable chunk. ``iterations``: fit
     iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``smooth``: the clip
-    fit's motion between frames (False: frames fitted as unrelated images; ``hands`` mode: each hand smoothed over
-    time; copy-and-paste and EFT give the regressors' bodies unsmoothed); ``overlay``, ``exports`` (of
-    `EXPORT_FILES`), ``frankmocap_pkl``, ``save_frames`` (a video's frames as images): the outputs besides the
-    motions.
+    fit's motion between frames (False: frames fitted as unrelated images; ``hands`` mode: each side's frames
+    fitted as one, `integrate.hand_clip`; copy-and-paste and EFT give the regressors' bodies unsmoothed);
+    ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``, ``save_frames`` (a video's frames as
+    images): the outputs besides the motions.
 
     A stored chunk is reused only under the same options (`chunk_key`), except those marked `AT_THE_END`.
     """

@@ -2,8 +2,9 @@
 video). Palms over the whole frame (`detect.hand_tracker`), up to ``max_hands``, tracked in a video, each with its
 side; per hand IK from its 21 world landmarks and the optimistix fit to its 21 keypoints (`integrate.hand_fit`), or
 with FrankMocap's weights the hand regressor on the hands' boxes, then the same fit. In chunks, resumable like the
-whole-body run; then per side temporal smoothing -> ``hands.npz`` (the left and the right hand: in each frame the
-likeliest of each side) -> OpenPose JSON of the hands, overlay, glTF.
+whole-body run; then in a video each side's frames as one fit with the motion between them (`integrate.hand_clip`,
+in windows placed by frame number) -> ``hands.npz`` (the left and the right hand: in each frame the likeliest of
+each side) -> OpenPose JSON of the hands, overlay, glTF.
 """
 
 from __future__ import annotations
@@ -15,8 +16,10 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 import smplx_jax
+from jaxmocap.compile_cache import disk_jit
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.hand_json import hands_openpose
 from jaxmocap.detect.hand_tracker import SIDES, HandTracker
@@ -24,21 +27,18 @@ from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import open_media
 from jaxmocap.hand_motion import HAND_SHAPES, hand_meshes, write_hands
+from jaxmocap.integrate.hand_clip import fit_hand_clip, hand_clip_start
 from jaxmocap.integrate.hand_fit import fit_hands, hand_keypoint_model
-from jaxmocap.integrate.smooth import smooth_linear, smooth_rotvecs
 from jaxmocap.io import atomic_path, file_sha256
 from jaxmocap.overlay import OverlayWriter, Posed
 from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.report import RunReport
+from jaxmocap.pipeline.stages import lens_of
+from jaxmocap.pipeline.whole_clip import hand_bone_directions, part_noise_px, window_spans
 
 SETTINGS_VERSION = 1  # of the stored chunks
-# (times, pixels): how much farther from its keypoints than its own fit a smoothed hand may reproject before the frame
-# keeps its fit. Each frame's hand is fitted alone, and one frame's fit can turn the hand round in depth from the
-# next's (each matches its image, their average neither): smoothing a moving hand over a few frames moves its
-# keypoints by a fraction of its fit's error, an average across such a turn by the hand's size.
-SMOOTHING_SLACK = (3.0, 20.0)
 
 # One row per hand seen in a frame: (column, shape after the row axis)
 COLUMNS = {"frame": (), "hand_id": (), "side": (), "keypoints_2d": (21, 3), "world": (21, 3), "score": (),
@@ -96,15 +96,17 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     meta = {"fps": np.asarray(media.fps), "image_size": np.asarray(media.size),
             "model_sha256": np.asarray(model_sha256)}
     hand_models = {side: smplx_jax.hand_model(model, side) for side in SIDES}
-    with chrono("smooth"):
-        hands = side_arrays(table, frames_total, hand_models, config.smooth)
+    fit = functools.partial(fitted_side, model, lens_of(media.size, config.focal_length), media.fps) if (
+        config.smooth and not still) else None
+    with chrono("clip"):
+        hands = side_arrays(table, frames_total, fit)
     with chrono("write"):
         written = [write_hands(out_dir / "hands.npz", hands | meta)]
         if config.max_hands > 2:
             for hand_id in np.unique(table["hand_id"]):
                 own = {k: v[table["hand_id"] == hand_id] for k, v in table.items()}
                 written.append(write_hands(out_dir / "hands" / f"{int(hand_id)}.npz",
-                                           side_arrays(own, frames_total, hand_models, config.smooth) | meta))
+                                           side_arrays(own, frames_total, fit) | meta))
     if config.overlay:
         with chrono("overlay"):
             written.append(write_hands_overlay(out_dir / "overlay.mp4", config, hand_models, hands, media.fps,
@@ -207,54 +209,63 @@ def whole_table(chunks: list[HandChunk]) -> dict[str, np.ndarray]:
     return {k: np.concatenate([p[k] for p in parts]) if parts else np.zeros((0,) + COLUMNS[k]) for k in COLUMNS}
 
 
-def side_arrays(table: dict[str, np.ndarray], frames: int, hand_models: dict, smooth: bool) -> dict[str, np.ndarray]:
+def side_arrays(table: dict[str, np.ndarray], frames: int, fit=None) -> dict[str, np.ndarray]:
     """hands.npz's per-side arrays over ``frames`` frames: in each frame the side's likeliest hand (highest
-    presence) of the table; smoothed over time (``smooth``), except where smoothing would take a hand off its
-    keypoints (`SMOOTHING_SLACK`)."""
+    presence) of the table; each side's frames fitted as one (``fit``, `fitted_side` but for its side, arrays and
+    3D landmarks; None: each frame's own fit)."""
     out = {}
     for k, side in enumerate(SIDES):
         arrays = {name: np.zeros((frames,) + shape, bool if name == "valid" else np.float32)
                   for name, shape in HAND_SHAPES.items()}
         arrays["camera_scale"][:] = 1.0
+        world = np.zeros((frames, 21, 3), np.float32)
         rows = np.flatnonzero(table["side"] == k)
         rows = rows[np.lexsort((table["score"][rows], table["frame"][rows]))]  # by frame, the likeliest last
+        at = table["frame"][rows].astype(int)
         for name in arrays:
-            arrays[name][table["frame"][rows].astype(int)] = table[name][rows]
-        if smooth and arrays["valid"].any():
-            arrays = smoothed_side(arrays, hand_models[side])
+            arrays[name][at] = table[name][rows]
+        world[at] = table["world"][rows]
+        if fit is not None and arrays["valid"].any():
+            arrays = fit(side, arrays, world)
         out |= {f"{side}_{name}": value for name, value in arrays.items()}
     return out
 
 
-@jax.jit
-def _smooth_side(global_orient, hand_pose, camera_scale, camera_trans, valid):
-    rotations = smooth_rotvecs(jnp.concatenate([global_orient[:, None], hand_pose], 1), valid)  # one conversion
-    camera = smooth_linear(jnp.concatenate([camera_scale[:, None], camera_trans], 1), valid)
-    return {"global_orient": rotations[:, 0], "hand_pose": rotations[:, 1:], "camera_scale": camera[:, 0],
-            "camera_trans": camera[:, 1:]}
+@disk_jit(static_argnames="side")
+def _fit_window(model, side, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found):
+    return fit_hand_clip(model, side, keypoints, start, focal_length=focal_length, principal_point=principal_point,
+                         fps=fps, keypoint_sigma_px=sigma, directions=directions, direction_weight=weight,
+                         found=found)
 
 
-def smoothed_side(arrays: dict[str, np.ndarray], hand: smplx_jax.HandModel) -> dict[str, np.ndarray]:
-    """One side's rotations (as quaternions) and camera filtered over time across valid frames; a frame whose
-    smoothed hand reprojects more than `SMOOTHING_SLACK` farther than its own fit keeps its fit."""
-    smooth = arrays | {k: np.asarray(v) for k, v in _smooth_side(
-        *(arrays[k] for k in ("global_orient", "hand_pose", "camera_scale", "camera_trans", "valid"))).items()}
-    errors = reprojection_errors(hand, smooth)
-    ratio, pixels = SMOOTHING_SLACK
-    keep = arrays["valid"] & (errors > np.maximum(ratio * arrays["reprojection_error_px"],
-                                                  arrays["reprojection_error_px"] + pixels))
-    out = {k: np.where(keep.reshape((-1,) + (1,) * (v.ndim - 1)), arrays[k], v) for k, v in smooth.items()}
-    out["reprojection_error_px"] = np.where(keep | ~arrays["valid"], arrays["reprojection_error_px"], errors)
-    return out
-
-
-def reprojection_errors(hand: smplx_jax.HandModel, arrays: dict[str, np.ndarray]) -> np.ndarray:
-    """(T,) mean pixel distance of one side's hand joints from its keypoints with confidence > 0 (0 if none)."""
-    joints = np.asarray(hand_meshes(hand, arrays["global_orient"], arrays["hand_pose"]).joints)
-    pixels = arrays["camera_scale"][:, None, None] * joints[..., :2] + arrays["camera_trans"][:, None]
-    seen = arrays["keypoints_2d"][..., 2] > 0
-    distance = np.linalg.norm(pixels - arrays["keypoints_2d"][..., :2], axis=-1)
-    return (np.where(seen, distance, 0).sum(1) / np.maximum(seen.sum(1), 1)).astype(np.float32)
+def fitted_side(model: smplx_jax.BodyModel, lens, fps: float, side: str, arrays: dict[str, np.ndarray],
+                world: Float[ArrayLike, "T 21 3"]) -> dict[str, np.ndarray]:
+    """One side's arrays (`HAND_SHAPES`, each frame's own fit) over a video at ``fps`` as one fit
+    (`integrate.hand_clip`) from those fits: its keypoints, each keypoint's noise (`whole_clip.part_noise_px`) and
+    its bones' directions from the 3D landmarks ``world`` (`whole_clip.hand_bone_directions`, through the pinhole
+    ``lens``), in windows placed by frame number (`whole_clip.window_spans`): the result does not depend on the
+    chunks the run was stored in. Valid where the frame's own fit was and the result is finite."""
+    valid = arrays["valid"]
+    keypoints = arrays["keypoints_2d"]
+    sigma = np.repeat(part_noise_px(keypoints)[:, None], 21, 1).astype(np.float32)
+    directions, weight = (np.asarray(a, np.float32) for a in hand_bone_directions(keypoints, world,
+                                                                                   keypoints[:, 0, 2], lens))
+    start = jax.tree.map(np.asarray, hand_clip_start(*(arrays[k] for k in (
+        "global_orient", "hand_pose", "camera_scale", "camera_trans"))))
+    focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
+    parts = []
+    for frames, inside, keep in window_spans(len(valid)):
+        window = start._replace(pose_rotvecs=start.pose_rotvecs[frames], transl=start.transl[frames])
+        result = _fit_window(model, side, keypoints[frames], window, focal, centre, np.float32(fps), sigma[frames],
+                             directions[frames], weight[frames], inside & valid[frames])
+        parts.append({k: np.asarray(v)[keep] for k, v in result._asdict().items() if k in HAND_SHAPES})
+    fitted = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    finite = np.all(np.isfinite(np.concatenate([fitted["global_orient"], fitted["hand_pose"].reshape(len(valid), -1),
+                                                fitted["camera_trans"]], 1)), 1)
+    ok = valid & finite
+    out = {k: np.where(ok.reshape((-1,) + (1,) * (v.ndim - 1)), v, arrays[k]).astype(np.float32)
+           for k, v in fitted.items()}
+    return arrays | out | {"valid": ok}
 
 
 def write_hand_keypoints(folder: Path, media, chunk: HandChunk, first: int, max_hands: int) -> None:

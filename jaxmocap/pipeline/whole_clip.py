@@ -59,20 +59,23 @@ ACCELERATOR_WINDOWS = 16
 HAND_SLICES = (slice(25, 46), slice(46, 67))
 
 
-def keypoint_noise_px(keypoints: np.ndarray) -> np.ndarray:
-    """``(T, 67)`` each keypoint's detector noise in pixels: `NOISE` times the larger side of the box of the seen
-    keypoints of its body (BODY_25) or its hand, at least `NOISE_FLOOR_PX`."""
-    def extent(part):
-        seen = part[..., 2] > 0
-        low = np.where(seen[..., None], part[..., :2], np.inf).min(1)
-        high = np.where(seen[..., None], part[..., :2], -np.inf).max(1)
-        side = np.max(high - low, -1)
-        return np.where(np.isfinite(side) & (side > 0), side, 1.0)
+def part_noise_px(part: Float[ArrayLike, "T N 3"]) -> np.ndarray:
+    """``(T,)`` the detector noise in pixels of each frame's keypoints of one part (a body, a hand): `NOISE`
+    times the larger side of the box of those seen, at least `NOISE_FLOOR_PX`."""
+    part = np.asarray(part, np.float64)
+    seen = part[..., 2] > 0
+    low = np.where(seen[..., None], part[..., :2], np.inf).min(1)
+    high = np.where(seen[..., None], part[..., :2], -np.inf).max(1)
+    side = np.max(high - low, -1)
+    return np.maximum(NOISE * np.where(np.isfinite(side) & (side > 0), side, 1.0), NOISE_FLOOR_PX)
 
+
+def keypoint_noise_px(keypoints: np.ndarray) -> np.ndarray:
+    """``(T, 67)`` each keypoint's detector noise in pixels: its body's (BODY_25) or its hand's `part_noise_px`."""
     keypoints = np.asarray(keypoints, np.float64)
     sigma = np.empty(keypoints.shape[:2])
     for part in (slice(0, 25), *HAND_SLICES):
-        sigma[:, part] = np.maximum(NOISE * extent(keypoints[:, part]), NOISE_FLOOR_PX)[:, None]
+        sigma[:, part] = part_noise_px(keypoints[:, part])[:, None]
     return sigma.astype(np.float32)
 
 
@@ -111,18 +114,37 @@ def bone_directions(obs: Observations, lens) -> tuple[np.ndarray, np.ndarray]:
                               np.minimum(world[:, a, 3], world[:, b, 3]))
     parts, weights = [body], [body_weight]
     for side, part in enumerate(HAND_SLICES):
-        wrist = keypoints[:, part][:, 0]
-        hand_turn = np.where((wrist[:, 2] > 0)[:, None, None], _ray_rotations(wrist[:, :2], lens), turn)
-        hand = np.asarray(obs.hands_world[:, side], np.float64)
-        a, b = (np.asarray(ends) for ends in zip(*HAND_BONES))
-        unit, weight = _unit(np.einsum("tij,tnj->tni", hand_turn, hand[:, b] - hand[:, a]),
-                             np.broadcast_to(np.asarray(obs.hands_conf[:, side], np.float64)[:, None],
-                                             (len(hand), len(a))))
+        unit, weight = hand_bone_directions(keypoints[:, part], obs.hands_world[:, side], obs.hands_conf[:, side],
+                                            lens, turn)
         parts.append(unit)
         weights.append(weight)
     found = np.asarray(obs.found)[:, None]
     return (np.concatenate(parts, 1).astype(np.float32),
             np.where(found, np.concatenate(weights, 1), 0.0).astype(np.float32))
+
+
+def hand_bone_directions(keypoints: Float[ArrayLike, "T 21 3"], world: Float[ArrayLike, "T 21 3"],
+                         presence: Float[ArrayLike, "T"], lens, turn=None) -> tuple[np.ndarray, np.ndarray]:
+    """The directions of `clip.HAND_BONES` ``(T, 20, 3)`` that a hand's 3D landmarks ``world`` give, turned into
+    the camera's axes by `_ray_rotations` at its wrist's pixel (where its keypoints are missing, by ``turn (T, 3,
+    3)``, default none), and their confidence ``(T, 20)``, the hand's ``presence``; 0 where not seen."""
+    keypoints = np.asarray(keypoints, np.float64)
+    wrist = keypoints[:, 0]
+    turn = np.broadcast_to(np.eye(3), (len(wrist), 3, 3)) if turn is None else turn
+    hand_turn = np.where((wrist[:, 2] > 0)[:, None, None], _ray_rotations(wrist[:, :2], lens), turn)
+    hand = np.asarray(world, np.float64)
+    a, b = (np.asarray(ends) for ends in zip(*HAND_BONES))
+    return _unit(np.einsum("tij,tnj->tni", hand_turn, hand[:, b] - hand[:, a]),
+                 np.broadcast_to(np.asarray(presence, np.float64)[:, None], (len(hand), len(a))))
+
+
+def window_spans(count: int):
+    """Each window over ``count`` frames: its frames (`WINDOW` and `MARGIN` on each side, placed by frame number,
+    padded at the ends with repeats), which of them lie in the track, and which it keeps (its own `WINDOW`)."""
+    for first in range(0, count, WINDOW):
+        span = np.arange(first - MARGIN, first + WINDOW + MARGIN)
+        inside = (span >= 0) & (span < count)
+        yield np.clip(span, 0, count - 1), inside, inside & (span >= first) & (span < first + WINDOW)
 
 
 def _windows_of(fun):
@@ -285,18 +307,11 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
         return jax.device_get(fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
                                   directions[frames], weight[frames], found, fit_betas=betas is None, config=config))
 
-    def windows():
-        """Each window's frames (padded at the ends with repeats), where they are in the track, which it keeps."""
-        for first in range(0, count, WINDOW):
-            span = np.arange(first - MARGIN, first + WINDOW + MARGIN)
-            inside = (span >= 0) & (span < count)
-            yield np.clip(span, 0, count - 1), inside, inside & (span >= first) & (span < first + WINDOW)
-
     def in_windows(fit, betas, keep=lambda result, frames: result, told=lambda frames: None):
         """What ``keep`` takes of ``fit``'s results and the window's frames (frames leading) over the track, window
         by window (`windows_at_once` of them solved together, placed by frame number; the last group padded with
         its last window), each window's frames ``told``."""
-        spans, parts, at_once = list(windows()), [], windows_at_once()
+        spans, parts, at_once = list(window_spans(count)), [], windows_at_once()
         for first in range(0, len(spans), at_once):
             group = spans[first:first + at_once]
             frames, inside, core = (np.stack(a) for a in zip(*group + group[-1:] * (at_once - len(group))))
