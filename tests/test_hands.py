@@ -371,8 +371,10 @@ def test_a_phone_photo_is_read_upright(still, tmp_path):
 
 def test_the_live_hand_solve_runs_on_the_host_cpu():
     """As the body's live solve (`test_live.test_the_solve_runs_on_the_host_cpu`): the hand models it solves with
-    are committed to the CPU, so `hand_step` runs there beside a GPU."""
+    and lens are committed to the CPU, so `hand_step` runs there beside a GPU."""
     from jaxmocap.live.hands import HandSolver
+    from jaxmocap.pipeline.stages import lens_of
 
-    for leaf in jax.tree.leaves(HandSolver(MODEL).models):
+    solver = HandSolver(MODEL, lens_of((320, 320)))
+    for leaf in jax.tree.leaves((solver.models, solver.lens)):
         assert leaf.committed and leaf.devices() == {jax.devices("cpu")[0]}

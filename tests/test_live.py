@@ -33,7 +33,6 @@ from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
 from jaxmocap.live import LiveConfig, LiveSettings, causal, live, params_from_message
 from jaxmocap.live.causal import CausalSolver
 from jaxmocap.live.mailbox import Closed, Mailbox
-from jaxmocap.live.one_euro import OneEuro, one_euro, one_euro_rotvecs, quaternion_state, start_state
 from jaxmocap.live.session import Session
 from jaxmocap.live.source import LiveSource
 from jaxmocap.live.stream import frame_message, parse_address, person_message
@@ -74,33 +73,6 @@ def test_mailbox_waits_when_lossless():
         box.put(k, wait=True)
     reader.join()
     assert taken == list(range(20)) and box.dropped == 0
-
-
-def test_one_euro_follows_a_step_without_jitter_at_rest():
-    settings = OneEuro(min_cutoff=1.0, beta=0.5)
-    state = start_state(jnp.zeros((1, 2)))
-    out = []
-    for _ in range(120):  # a step to 1, 2 s at 60 fps
-        value, state = one_euro(jnp.ones((1, 2)), state, 1 / 60, settings)
-        out.append(float(value[0, 0]))
-    assert 0 < out[0] < 0.6 and np.all(np.diff(out) >= 0) and out[-1] == pytest.approx(1.0, abs=1e-3)
-    noisy = np.random.default_rng(0).normal(0, 0.01, (120, 1, 2))
-    state, still = start_state(jnp.zeros((1, 2))), []
-    for x in noisy:
-        value, state = one_euro(jnp.asarray(x), state, 1 / 60, settings)
-        still.append(np.asarray(value))
-    assert np.std(still[20:]) < 0.3 * np.std(noisy)
-
-
-def test_one_euro_rotations_ignore_the_quaternion_sign():
-    """The same rotation written either way round (near pi, where axis-angles jump) gives a steady output."""
-    near_pi = np.array([[3.1, 0.0, 0.0]], np.float32)
-    other_way = -near_pi * (2 * np.pi - 3.1) / 3.1  # the same rotation
-    state = quaternion_state(jnp.asarray(near_pi))
-    for x in (near_pi, other_way) * 10:
-        value, state = one_euro_rotvecs(jnp.asarray(x), state, 1 / 60, OneEuro(1.0, 0.5))
-        angle = np.linalg.norm(np.asarray(value)[0])
-        assert angle == pytest.approx(3.1, abs=1e-3)
 
 
 def test_a_file_played_as_live_drops_what_a_slow_reader_misses():

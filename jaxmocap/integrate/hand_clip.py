@@ -259,12 +259,14 @@ def hand_preconditioner(y: HandClipUnknowns, data: HandClipData, config: ClipCon
     return HandBlocks(banded.Banded(diagonal, first, second))
 
 
-def hand_clip_problem(model: BodyModel | KeypointModel, side: str, keypoints: Float[ArrayLike, "T 21 3"],
+def hand_clip_problem(model: BodyModel | KeypointModel, side: str | Bool[ArrayLike, ""],
+                      keypoints: Float[ArrayLike, "T 21 3"],
                       start: HandClipUnknowns, *, focal_length, principal_point, fps,
                       keypoint_sigma_px: Float[ArrayLike, "T 21"], directions: Float[ArrayLike, "T 20 3"],
                       direction_weight: Float[ArrayLike, "T 20"], found: Bool[ArrayLike, "T"] | None = None
                       ) -> HandClipData:
-    """`fit_hand_clip`'s data (its arguments; ``model`` or the side's keypoint model already built)."""
+    """`fit_hand_clip`'s data (its arguments; ``model`` or the side's keypoint model already built, which a traced
+    ``side``, true for the left hand, needs)."""
     dtype = start.transl.dtype
     keypoints = jnp.asarray(keypoints)
     finite = jnp.all(jnp.isfinite(keypoints), -1)
@@ -272,7 +274,8 @@ def hand_clip_problem(model: BodyModel | KeypointModel, side: str, keypoints: Fl
     target = jnp.where(finite[..., None], keypoints[..., :2], 0.0).astype(dtype)
     found = jnp.sum(confidence > 0, -1) > 0 if found is None else jnp.asarray(found)
     km = model if isinstance(model, KeypointModel) else hand_keypoint_model(model, side)
-    return HandClipData(km, jnp.asarray(side == "left"), target, confidence, jnp.asarray(keypoint_sigma_px, dtype),
+    left = jnp.asarray(side == "left") if isinstance(side, str) else jnp.asarray(side, bool)
+    return HandClipData(km, left, target, confidence, jnp.asarray(keypoint_sigma_px, dtype),
                         jnp.asarray(directions, dtype), jnp.asarray(direction_weight, dtype), found.astype(dtype),
                         start, jnp.asarray(focal_length, dtype), jnp.asarray(principal_point, dtype),
                         jnp.asarray(fps, dtype))

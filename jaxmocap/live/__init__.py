@@ -6,8 +6,7 @@ web page and streamed as JSON lines over UDP.
 
 from jaxmocap.live.causal import CausalSolver, LiveSettings
 from jaxmocap.live.entry import live
-from jaxmocap.live.one_euro import OneEuro
 from jaxmocap.live.session import LiveConfig, LiveReport
 from jaxmocap.live.stream import params_from_message
 
-__all__ = ["CausalSolver", "LiveConfig", "LiveReport", "LiveSettings", "OneEuro", "live", "params_from_message"]
+__all__ = ["CausalSolver", "LiveConfig", "LiveReport", "LiveSettings", "live", "params_from_message"]
