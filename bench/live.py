@@ -17,6 +17,7 @@ import socket
 import sys
 import tempfile
 import threading
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -51,9 +52,9 @@ def agreement_mm(model, live_motion: dict, offline_motion: dict, first_frame: in
     return float(np.mean(errors) * 1000), len(both)
 
 
-def _watch(port: int, stop: threading.Event, seen: list) -> None:
-    """A viewer: reads the page's MJPEG stream until ``stop``, counting the frames it got."""
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}/stream.mjpg", timeout=10) as stream:
+def _watch(url: str, stop: threading.Event, seen: list) -> None:
+    """A viewer of the page at ``url``: reads its MJPEG stream until ``stop``, counting the frames it got."""
+    with urllib.request.urlopen(urllib.parse.urljoin(url, "stream.mjpg"), timeout=10) as stream:
         while not stop.is_set():
             line = stream.readline()
             if line.startswith(b"Content-Length:"):
@@ -70,9 +71,9 @@ def session(loops: int, watched: bool) -> dict:
     receiver.settimeout(0.5)
     stop, seen, messages, threads = threading.Event(), [], [], []
 
-    def started(port):
+    def started(url):
         if watched:
-            threads.append(threading.Thread(target=_watch, args=(port, stop, seen), daemon=True))
+            threads.append(threading.Thread(target=_watch, args=(url, stop, seen), daemon=True))
             threads.append(threading.Thread(target=_receive, args=(receiver, stop, messages), daemon=True))
             for t in threads:
                 t.start()

@@ -94,6 +94,7 @@ def _cmd_demo(args):
 def _cmd_live(args):
     from jaxmocap.live import LiveConfig, live
     from jaxmocap.live.stream import parse_address
+    from jaxmocap.live.viewer import is_loopback
 
     try:
         udp = None if args.udp is None else parse_address(args.udp)
@@ -104,9 +105,12 @@ def _cmd_live(args):
                         serve=args.serve, host=args.host, udp=udp, record=args.record, model=args.model,
                         focal_length=args.focal_length, max_frames=args.frames, progress=not args.quiet)
 
-    def started(port):
-        where = f"; watch at http://{args.host}:{port}/" if port is not None else ""
+    def started(url):
+        where = f"; watch at {url}" if url is not None else ""
         print(f"live: capturing {args.source}{where} (Ctrl-C stops)", file=sys.stderr, flush=True)
+        if url is not None and not is_loopback(args.host):
+            print(f"live: the camera is visible on the network at {args.host} to anyone with this link",
+                  file=sys.stderr, flush=True)
 
     report = live(config, started)
     print(report.summary())
@@ -257,7 +261,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="play a file N times, 0 for ever (default: %(default)s)")
     p.add_argument("--serve", type=int, default=None, metavar="PORT", help="show the overlay on a web page at PORT")
     p.add_argument("--host", default="127.0.0.1",
-                   help="address the page listens on (default: %(default)s, this machine only)")
+                   help="address the page listens on (default: %(default)s, this machine only; any other puts the "
+                        "camera on the network, behind a token printed at start)")
     p.add_argument("--udp", default=None, metavar="HOST:PORT",
                    help="send each frame's SMPL-X parameters as a JSON line (docs/formats.md, \"Live stream\")")
     p.add_argument("--record", type=Path, default=None, metavar="DIR",

@@ -122,7 +122,7 @@ def test_web_page_serves_its_page_and_stream_and_nothing_else():
                      "/jaxmocap/live/viewer.py", "//etc/passwd"):
             assert _get(viewer.port, path)[0] == 404, path
         with socket.create_connection(("127.0.0.1", viewer.port)) as raw:  # a path urllib would normalise
-            raw.sendall(b"GET /../../etc/passwd HTTP/1.0\r\n\r\n")
+            raw.sendall(f"GET /../../etc/passwd HTTP/1.0\r\nHost: localhost:{viewer.port}\r\n\r\n".encode())
             assert raw.recv(100).startswith(b"HTTP/1.0 404")
         with urllib.request.urlopen(f"http://127.0.0.1:{viewer.port}/stream.mjpg", timeout=5) as stream:
             assert "multipart/x-mixed-replace" in stream.headers["Content-Type"]
@@ -132,11 +132,90 @@ def test_web_page_serves_its_page_and_stream_and_nothing_else():
         viewer.close()
 
 
+def _raw_get(port: int, path: str, host: str | None) -> tuple[int, bytes]:
+    """A GET sent to 127.0.0.1 with ``Host: host`` (None: no Host header): the status and all bytes received
+    within a second."""
+    with socket.create_connection(("127.0.0.1", port), timeout=1.0) as raw:
+        raw.sendall(f"GET {path} HTTP/1.1\r\n".encode() + (f"Host: {host}\r\n".encode() if host else b"")
+                    + b"Connection: close\r\n\r\n")
+        received = b""
+        try:
+            while chunk := raw.recv(65536):
+                received += chunk
+        except TimeoutError:
+            pass
+    return int(received.split(b" ", 2)[1]), received
+
+
+def test_the_page_answers_only_requests_that_name_it():
+    """DNS rebinding: a page elsewhere that rebinds its name to 127.0.0.1 sends its own name as ``Host``. Such a
+    request (or one without ``Host``) gets 403 and no body on every path, the stream's frame never sent; the
+    names of the loopback address with the page's port are served."""
+    viewer = Viewer("127.0.0.1", 0)
+    try:
+        viewer.publish(b"\xff\xd8secret-frame\xff\xd9", {"fps": 20.0})
+        for path in ("/", "/stats.json", "/stream.mjpg"):
+            for host in (f"attacker.example:{viewer.port}", "attacker.example", f"127.0.0.1:{viewer.port + 1}",
+                         None):
+                status, received = _raw_get(viewer.port, path, host)
+                assert status == 403 and received.endswith(b"\r\n\r\n") and b"secret" not in received, (path, host)
+        for host in (f"127.0.0.1:{viewer.port}", f"localhost:{viewer.port}", f"[::1]:{viewer.port}"):
+            assert _raw_get(viewer.port, "/stats.json", host)[0] == 200, host
+        assert viewer.url == f"http://127.0.0.1:{viewer.port}/"
+    finally:
+        viewer.close()
+
+
+def test_a_page_on_the_network_needs_its_token():
+    """Listening on every address (``--host 0.0.0.0``; requests here sent to 127.0.0.1 only): without the token
+    printed in the page's URL, or with another, 403; with it the page, its stream and rates, the page's own
+    links carrying it."""
+    viewer = Viewer("0.0.0.0", 0)
+    try:
+        viewer.publish(b"\xff\xd8secret-frame\xff\xd9", {"fps": 20.0})
+        token = viewer.url.split("?token=")[1]
+        assert len(token) >= 16 and viewer.url.startswith(f"http://127.0.0.1:{viewer.port}/?token=")
+        host = f"192.168.1.20:{viewer.port}"  # a name the page cannot know
+        for path in ("/", "/stats.json", "/stream.mjpg"):
+            for query in ("", "?token=", f"?token={token[:-1]}x", f"?other={token}"):
+                status, received = _raw_get(viewer.port, path + query, host)
+                assert status == 403 and b"secret" not in received, (path, query)
+        status, page = _raw_get(viewer.port, f"/?token={token}", host)
+        assert status == 200 and f"/stream.mjpg?token={token}".encode() in page
+        assert _raw_get(viewer.port, f"/stats.json?token={token}", host)[0] == 200
+        assert b"secret-frame" in _raw_get(viewer.port, f"/stream.mjpg?token={token}", host)[1]
+    finally:
+        viewer.close()
+
+
+def test_the_page_serves_a_bounded_number_of_streams():
+    """Each stream holds a thread: beyond ``max_viewers`` at once, 503; a stream that goes frees its place."""
+    viewer = Viewer("127.0.0.1", 0, max_viewers=2)
+    host = f"127.0.0.1:{viewer.port}"
+    watching = [socket.create_connection(("127.0.0.1", viewer.port)) for _ in range(2)]
+    try:
+        for raw in watching:
+            raw.sendall(f"GET /stream.mjpg HTTP/1.1\r\nHost: {host}\r\n\r\n".encode())
+            assert raw.recv(100).startswith(b"HTTP/1.0 200")
+        assert _raw_get(viewer.port, "/stream.mjpg", host)[0] == 503
+        assert _raw_get(viewer.port, "/", host)[0] == 200  # the page itself is not a stream
+        watching.pop().close()  # its place is free once a frame fails to reach it
+        deadline, status = time.monotonic() + 10, 503
+        while status == 503 and time.monotonic() < deadline:
+            viewer.publish(b"\xff\xd8frame\xff\xd9" * 20_000)
+            status = _raw_get(viewer.port, "/stream.mjpg", host)[0]
+        assert status == 200
+    finally:
+        for raw in watching:
+            raw.close()
+        viewer.close()
+
+
 def test_a_viewer_that_stops_reading_never_stalls_publishing():
     viewer = Viewer("127.0.0.1", 0, timeout=2.0)
     stalled = socket.create_connection(("127.0.0.1", viewer.port))
     stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    stalled.sendall(b"GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")  # and never reads
+    stalled.sendall(f"GET /stream.mjpg HTTP/1.1\r\nHost: 127.0.0.1:{viewer.port}\r\n\r\n".encode())  # never reads
     try:
         frame = bytes(500_000)
         start = time.perf_counter()

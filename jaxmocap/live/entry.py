@@ -7,9 +7,9 @@ from jaxmocap.live.session import LiveConfig, LiveReport, Session
 
 
 def live(config: LiveConfig, started=None) -> LiveReport:
-    """Run a live session until the source ends, ``max_frames`` are solved or Ctrl-C; ``started(port)`` is called
-    when capture starts, after compiling (``port``: the web page's, or None). ``mode`` ``hands`` solves hands
-    alone (`HandSession`)."""
+    """Run a live session until the source ends, ``max_frames`` are solved or Ctrl-C; ``started(url)`` is called when
+    capture starts, after compiling (``url``: where to watch the web page, its token included, or None). ``mode``
+    ``hands`` solves hands alone (`HandSession`)."""
     session = HandSession(config) if config.mode == "hands" else Session(config)
     try:
         session.warm_up()
@@ -17,5 +17,5 @@ def live(config: LiveConfig, started=None) -> LiveReport:
         session.close()
         raise
     if started is not None:
-        started(None if session.viewer is None else session.viewer.port)
+        started(None if session.viewer is None else session.viewer.url)
     return session.run()

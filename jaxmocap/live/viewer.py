@@ -2,31 +2,60 @@
 
 It serves three paths only, ``/`` (the page), ``/stream.mjpg`` and ``/stats.json``; anything else is a 404, and
 no path reaches the file system. Each viewer has its own thread: `publish` only swaps the newest frame in, so a
-slow viewer misses frames and a vanished one times out; capture never waits for either."""
+slow viewer misses frames and a vanished one times out; capture never waits for either.
 
+Who may watch: a request's ``Host`` must name the address the page listens on (on a loopback address: 127.0.0.1,
+localhost or [::1], with its port), so that a web page elsewhere cannot rebind its own name to this machine and
+read the camera through the user's browser; others get 403 and no body. Listening on any other address puts the
+camera on the network: then every request also carries the page's token (`url`, printed at start; 403 without
+it), and on a wildcard address (0.0.0.0, ::), whose names cannot be known, the token alone admits. At most
+``max_viewers`` streams at once (503 beyond)."""
+
+import hmac
+import ipaddress
 import json
+import secrets
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from urllib.parse import parse_qs
 
 PAGE = """<!doctype html>
 <html><head><meta charset="utf-8"><title>jaxmocap live</title>
 <style>body{margin:0;background:#222;color:#ddd;font:14px sans-serif;text-align:center}
 img{max-width:100vw;max-height:92vh}#s{padding:6px}</style></head>
-<body><div id="s">jaxmocap live</div><img src="/stream.mjpg" alt="live overlay">
+<body><div id="s">jaxmocap live</div><img src="/stream.mjpg__QUERY__" alt="live overlay">
 <script>
-async function tick(){try{const s=await (await fetch('/stats.json')).json();
+async function tick(){try{const s=await (await fetch('/stats.json__QUERY__')).json();
 document.getElementById('s').textContent=`${s.fps.toFixed(1)} frames/s, latency ${s.latency_ms.toFixed(0)} ms, `+
 `${s.dropped} dropped, `+('hands' in s?`${s.hands} hands`:`${s.people} people`);}catch(e){}}
 setInterval(tick,1000);
 </script></body></html>
 """
 BOUNDARY = "jaxmocapframe"
+MAX_VIEWERS = 8  # streams at once, each a thread and a socket (a page is one)
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+WILDCARDS = ("0.0.0.0", "::", "")
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (a name or an address) is this machine only."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 class Viewer:
-    """Serves the page on ``host:port`` (port 0: any free one; `port` says which) until `close`."""
+    """Serves the page on ``host:port`` (port 0: any free one; `port` says which, `url` where to watch) until
+    `close`, to the requests the module docstring admits."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 8080, timeout: float = 5.0):
+    def __init__(self, host: str = "127.0.0.1", port: int = 8080, timeout: float = 5.0,
+                 max_viewers: int = MAX_VIEWERS):
+        self.host = host
+        self.token = None if is_loopback(host) else secrets.token_urlsafe(16)
+        self._streams = threading.BoundedSemaphore(max_viewers)
         self._changed = threading.Condition()
         self._jpeg, self._count, self._closed = None, 0, False
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, "people": 0}
@@ -38,8 +67,37 @@ class Viewer:
         self.server = ThreadingHTTPServer((host, port), Handler)
         self.server.daemon_threads = True
         self.port = self.server.server_address[1]
+        named = f"[{host}]" if ":" in host else host
+        self._hosts = None if host in WILDCARDS else {f"{name}:{self.port}".lower() for name in (
+            LOOPBACK_NAMES if is_loopback(host) else ()) + (named,)}
         self._thread = threading.Thread(target=self.server.serve_forever, name="jaxmocap-viewer", daemon=True)
         self._thread.start()
+
+    @property
+    def url(self) -> str:
+        """Where to watch: the page's address, with its token when it has one."""
+        shown = "127.0.0.1" if self.host in WILDCARDS else f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{shown}:{self.port}/" + self.query
+
+    @property
+    def query(self) -> str:
+        return "" if self.token is None else f"?token={self.token}"
+
+    def admits(self, host_header: str | None, query: str) -> bool:
+        """Whether a request with this ``Host`` header and query string may be answered."""
+        if self._hosts is not None and (host_header or "").strip().lower() not in self._hosts:
+            return False
+        if self.token is None:
+            return True
+        given = parse_qs(query).get("token", [""])[0]
+        return hmac.compare_digest(given.encode(), self.token.encode())
+
+    def take_stream(self) -> bool:
+        """One of the `max_viewers` streams' places (False: all taken); `give_stream` gives it back."""
+        return self._streams.acquire(blocking=False)
+
+    def give_stream(self) -> None:
+        self._streams.release()
 
     def publish(self, jpeg: bytes, stats: dict | None = None) -> None:
         """The newest frame (JPEG bytes) and rates; returns at once."""
@@ -76,9 +134,11 @@ class _Handler(BaseHTTPRequestHandler):
         pass
 
     def do_GET(self) -> None:
-        path = self.path.split("?", 1)[0]
-        if path == "/":
-            self._send(200, "text/html; charset=utf-8", PAGE.encode())
+        path, _, query = self.path.partition("?")
+        if not self.viewer.admits(self.headers.get("Host"), query):
+            self._send(403, "text/plain", b"")
+        elif path == "/":
+            self._send(200, "text/html; charset=utf-8", PAGE.replace("__QUERY__", self.viewer.query).encode())
         elif path == "/stats.json":
             self._send(200, "application/json", json.dumps(self.viewer.stats).encode())
         elif path == "/stream.mjpg":
@@ -95,6 +155,15 @@ class _Handler(BaseHTTPRequestHandler):
         self.wfile.write(body)
 
     def _stream(self) -> None:
+        if not self.viewer.take_stream():
+            self._send(503, "text/plain", b"")
+            return
+        try:
+            self._frames()
+        finally:
+            self.viewer.give_stream()
+
+    def _frames(self) -> None:
         self.send_response(200)
         self.send_header("Content-Type", f"multipart/x-mixed-replace; boundary={BOUNDARY}")
         self.send_header("Cache-Control", "no-store")
