@@ -332,4 +332,7 @@ def _print_table(rows: list[dict], title: str) -> None:
 
 
 if __name__ == "__main__":
+    from jaxmocap.xla_options import configure_process
+
+    configure_process()  # a command of the project: its process's settings before JAX starts
     main()

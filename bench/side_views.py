@@ -80,4 +80,7 @@ def main():
 
 
 if __name__ == "__main__":
+    from jaxmocap.xla_options import configure_process
+
+    configure_process()  # a command of the project: its process's settings before JAX starts
     main()

@@ -1,5 +1,6 @@
-"""XLA options for jaxmocap's programs, and the threads of the LAPACK they call, set when the package is imported
-(it starts no JAX computation).
+"""XLA options for jaxmocap's programs, and the threads of the LAPACK they call, set for its own processes by each
+command (`configure_process`: the CLI, the trainer, a batch's workers, the benchmarks) before JAX starts. A library
+imported into someone's notebook or service sets nothing: its process's XLA and BLAS settings are its own.
 
 XLA's newer CPU fusion emitters (its default in recent jaxlib) compile the fit's programs a third slower than its
 older ones and run them no faster (docs/BENCHMARKS.md, "Compile time"), so the older ones are asked for (ResNets,
@@ -41,6 +42,13 @@ def set_cpu_options(environ=os.environ) -> bool:
         return False
     environ["XLA_FLAGS"] = f"{flags} --{OPTION}={VALUE}".strip()
     return True
+
+
+def configure_process(environ=os.environ) -> None:
+    """What a command of jaxmocap sets for its own process (and those it starts) before JAX starts:
+    `set_cpu_options` and `set_lapack_threads`, each never over the user's own setting."""
+    set_cpu_options(environ)
+    set_lapack_threads(environ)
 
 
 def set_lapack_threads(environ=os.environ) -> bool:

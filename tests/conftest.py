@@ -71,7 +71,9 @@ def pytest_unconfigure(config):
 
 import jax  # noqa: E402
 
-import jaxmocap  # noqa: E402, F401  (sets XLA's options before anything starts JAX)
+from jaxmocap.xla_options import configure_process  # noqa: E402
+
+configure_process()  # as the commands do, before anything starts JAX (the tests' processes are the project's own)
 import smplx_jax  # noqa: E402
 from jaxmocap.xla_options import RUN_ONCE  # noqa: E402
 from random_model import random_model_arrays  # noqa: E402
@@ -197,7 +199,7 @@ def cli_as_from_a_terminal(*args: str, python_options: tuple[str, ...] = ()) -> 
     (CI's, nohup's, a shell's ``cmd &``) inherits SIGINT ignored, its subprocesses too, and Python then leaves it
     ignored: the tests' SIGINT would be lost."""
     start = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-             "from jaxmocap.cli import main; sys.exit(main(sys.argv[1:]))")
+             "from jaxmocap.command import main; sys.exit(main(sys.argv[1:]))")
     return [sys.executable, *python_options, "-c", start, *args]
 
 

@@ -1,27 +1,27 @@
-"""XLA's options: the older CPU fusion emitters asked for on import, before JAX starts, never over the user's; and
-OpenBLAS held to one thread for jaxlib's LAPACK."""
+"""XLA's options: the older CPU fusion emitters asked for by each command before JAX starts, never over the user's;
+OpenBLAS held to one thread for jaxlib's LAPACK; a library import that changes nothing in its host process."""
 
 import os
 import subprocess
 import sys
 from importlib import metadata
+from pathlib import Path
 
 from jaxmocap import xla_options
 from jaxmocap.xla_options import set_cpu_options, set_lapack_threads
 
-# Records XLA_FLAGS as JAX starts its backend (the moment XLA reads them), then imports the module given.
+# Records XLA_FLAGS as JAX starts its backend (the moment XLA reads them) and ends the process there; before that,
+# runs the statement given (an entry point).
 SPY = """
 import os, sys
 from jax._src import xla_bridge
-start = xla_bridge._init_backend
 def spy(*args, **kwargs):
-    print("XLA_FLAGS at start:", os.environ.get("XLA_FLAGS"))
-    return start(*args, **kwargs)
+    print("XLA_FLAGS at start:", os.environ.get("XLA_FLAGS"), flush=True)
+    os._exit(0)
 xla_bridge._init_backend = spy
-__import__(sys.argv[1])
-import jax
-jax.numpy.zeros(1).block_until_ready()
+exec(sys.argv[1])
 """
+DATA = Path(__file__).parent / "data"
 
 
 def test_the_option_is_added_once_and_never_over_the_users():
@@ -42,20 +42,45 @@ def test_a_jaxlib_that_may_not_know_the_option_is_left_alone(monkeypatch):
     assert xla_options._release(metadata.version("jaxlib")) >= (0, 5, 3)
 
 
-def test_every_entry_point_sets_it_before_jax_starts():
+def test_every_command_sets_it_before_jax_starts(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    for module in ("jaxmocap.cli", "jaxmocap.integrate", "train.train"):
-        out = subprocess.run([sys.executable, "-c", SPY, module], capture_output=True, text=True, env=env,
-                             timeout=300)
+    clip = DATA / "pose2sim_hand_closeup.mp4"
+    for entry in (f"from jaxmocap.command import main; main(['fit', '{DATA / 'openpose'}', '--out', '{tmp_path}'])",
+                  f"from train.main import main; main(['--config', 'smoke', '--workdir', '{tmp_path}'])",
+                  "from jaxmocap.batch.task import run_video; from jaxmocap.pipeline import RunConfig; "
+                  f"run_video(RunConfig('{clip}', mode='hands'), '{tmp_path}', '{tmp_path / 'mark'}', {{}})"):
+        out = subprocess.run([sys.executable, "-c", SPY, entry], capture_output=True, text=True, env=env,
+                             timeout=300, cwd=Path(__file__).parents[1])
         assert out.returncode == 0, out.stderr[-2000:]
-        assert "XLA_FLAGS at start: --xla_cpu_use_fusion_emitters=false" in out.stdout, (module, out.stdout)
+        assert "XLA_FLAGS at start: --xla_cpu_use_fusion_emitters=false" in out.stdout, (entry, out.stdout)
 
 
-# Imports the module given as a user's entry point does, runs a Cholesky factorisation on the CPU (jaxlib loads
-# scipy's OpenBLAS for it), then prints each OpenBLAS loaded in the process and its number of threads.
+# A library user's program: imports jaxmocap's packages, computes, and prints what changed in its environment.
+IMPORTED = """
+import os
+import cv2, flax, jax, numpy, optax, optimistix, ray  # what they set on import is their own
+before = dict(os.environ)
+import jaxmocap, jaxmocap.pipeline, jaxmocap.integrate, jaxmocap.live, jaxmocap.batch, jaxmocap.detect, smplx_jax
+import jax.numpy as jnp
+jnp.linalg.cholesky(jnp.eye(3)).block_until_ready()
+print(sorted(k for k in set(before) | set(os.environ) if before.get(k) != os.environ.get(k)))
+"""
+
+
+def test_importing_jaxmocap_changes_nothing_in_its_host_process():
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "OPENBLAS_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", IMPORTED], capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "[]", out.stdout
+
+
+# Starts the command line (its help: nothing else), runs a Cholesky factorisation on the CPU (jaxlib loads scipy's
+# OpenBLAS for it), then prints each OpenBLAS loaded in the process and its number of threads.
 THREADS = """
-import ctypes, sys
-__import__(sys.argv[1])
+import contextlib, ctypes, io
+from jaxmocap.command import main
+with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):
+    main(["--help"])
 import jax.numpy as jnp
 jnp.linalg.cholesky(jnp.eye(3)).block_until_ready()
 paths = sorted({line.split()[-1] for line in open("/proc/self/maps") if "openblas" in line.rsplit("/", 1)[-1]})
@@ -73,8 +98,7 @@ def test_lapack_runs_on_one_openblas_thread_unless_the_user_says():
     # (OpenBLAS also reads GOTO_NUM_THREADS and OMP_NUM_THREADS, which conftest.py sets for PyTorch)
     unset = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")
     env = {k: v for k, v in os.environ.items() if k not in unset}
-    out = subprocess.run([sys.executable, "-c", THREADS, "jaxmocap.cli"], capture_output=True, text=True, env=env,
-                         timeout=300)
+    out = subprocess.run([sys.executable, "-c", THREADS], capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     threads = dict(line.rsplit(" ", 1) for line in out.stdout.splitlines())
     assert any("scipy" in path for path in threads) and set(threads.values()) == {"1"}, threads

@@ -10,10 +10,12 @@ import sys
 
 import jax
 
+from jaxmocap.xla_options import configure_process
 from train import configs
 
 
 def main(argv: list[str] | None = None) -> int:
+    configure_process()  # before anything starts JAX (`jaxmocap.xla_options`)
     parser = argparse.ArgumentParser(allow_abbrev=False, prog="python -m train.main",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--config", required=True, choices=configs.NAMES)

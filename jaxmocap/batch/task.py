@@ -12,6 +12,7 @@ from jaxmocap.errors import InputError
 from jaxmocap.io import read_result_npz
 from jaxmocap.pipeline import RunConfig, run
 from jaxmocap.signals import cancellable
+from jaxmocap.xla_options import configure_process
 from smplx_jax import ModelFileError
 
 
@@ -21,6 +22,7 @@ def run_video(config: RunConfig, out: str, mark: str, key: dict) -> VideoRecord:
     record with its one-line cause, not an exception: one bad input stops nothing else. Ctrl-C (Ray's cancel)
     passes through, wherever in the run it lands (`signals.cancellable`), after the run's atomic writes roll
     back."""
+    configure_process()  # the worker's own process, as the command's (`xla_options`)
     use_compilation_cache()  # a program any worker compiled before is read back, not compiled again
     started = time.perf_counter()
     Path(mark).unlink(missing_ok=True)  # the outputs are being rewritten: not finished until marked again
