@@ -357,5 +357,8 @@ def main(argv=None) -> int:
     return code or 0  # `batch`: 1 when a video failed
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # python -m jaxmocap.cli: as the `jaxmocap` command (`command`)
+    from jaxmocap.xla_options import configure_process
+
+    configure_process()
     sys.exit(main())

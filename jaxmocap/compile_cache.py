@@ -10,6 +10,7 @@ import importlib.metadata
 import inspect
 import json
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -24,14 +25,27 @@ def use_compilation_cache() -> None:
     """Keep XLA's compiled programs on disk (``$JAXMOCAP_CACHE/xla``, at most 1 GiB, least recently used out), so
     that a second run skips the compilation (docs/BENCHMARKS.md, "End to end"): every program, the small ones too
     (a run's ~140 programs under 0.5 s took 3-4 s to compile again in each run). ``JAX_COMPILATION_CACHE_DIR``
-    takes precedence. The `disk_jit` programs go into its folder ``jaxmocap-programs``."""
-    from smplx_jax.default_model import cache_root
+    takes precedence. The `disk_jit` programs go into its folder ``jaxmocap-programs``. The folders are made
+    private to the user (0700); programs are loaded code, so a cache another user could write to is not used (a
+    one-line warning; programs compile anew)."""
+    from smplx_jax.default_model import cache_root, open_to_others, private_folder
 
     if jax.config.jax_compilation_cache_dir is None:
-        jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
+        private_folder(cache_root())
+        jax.config.update("jax_compilation_cache_dir", str(private_folder(cache_root() / "xla")))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_compilation_cache_max_size", 1 << 30)
-    keep_lowered_programs(Path(jax.config.jax_compilation_cache_dir) / "jaxmocap-programs")
+    folder = Path(jax.config.jax_compilation_cache_dir)
+    programs = private_folder(folder / "jaxmocap-programs")
+    guarded = (folder, programs) + ((cache_root(),) if folder == cache_root() / "xla" else ())
+    exposed = next((path for path in guarded if open_to_others(path)), None)
+    if exposed is not None:
+        print(f"jaxmocap: not using the compile cache {folder}: {exposed} is writable by other users (programs "
+              "compile anew)", file=sys.stderr)
+        jax.config.update("jax_compilation_cache_dir", None)
+        keep_lowered_programs(None)
+        return
+    keep_lowered_programs(programs)
 
 
 def keep_lowered_programs(folder: Path | None) -> None:

@@ -64,11 +64,30 @@ def cache_root() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "jaxmocap"
 
 
+def private_folder(path: Path) -> Path:
+    """``path``, made where missing (with its missing parents) readable and writable by this user alone (0700)."""
+    path = Path(path)
+    for folder in reversed([p for p in (path, *path.parents) if not p.exists()]):
+        folder.mkdir(mode=0o700, exist_ok=True)
+    return path
+
+
+def open_to_others(path: Path) -> bool:
+    """Whether another user could change what ``path`` holds: it is not this user's, or a group or others may write
+    it (False where it does not exist)."""
+    try:
+        status = Path(path).stat()
+    except OSError:
+        return False
+    return status.st_uid != os.getuid() or bool(status.st_mode & 0o022)
+
+
 def default_model_path() -> Path:
     """Path of ``SMPLX_NEUTRAL.npz`` of the default model, generated on first use and cached under
     ``$JAXMOCAP_CACHE`` (or ``~/.cache/jaxmocap``) in ``default_model/<generator id>/smplx/``; the folder two
     levels up is what ``smplx.create(folder, model_type="smplx")`` takes."""
     path = cache_root() / "default_model" / generator_id() / "smplx" / "SMPLX_NEUTRAL.npz"
     if not path.is_file():
+        private_folder(cache_root())
         write_default_model(path)
     return path

@@ -229,6 +229,19 @@ def test_second_call_skips_finished_videos_and_rewrites_nothing(cluster_batch, r
     assert seconds < 0.25 * first_seconds, (seconds, first_seconds)
 
 
+def test_a_second_call_keeps_the_first_calls_failures(local_batch, clips, ray_env):
+    """The ledger is the folder's: a second call on the finished video alone leaves the empty and the corrupt file
+    listed as failed (each video keeps its last status and error until it is run again) and rewrites nothing."""
+    _, out = local_batch
+    before = files_with_times(out)
+    proc = subprocess.run(jaxmocap("batch", str(clips["good"]), "--out", str(out), *OPTIONS), capture_output=True,
+                          text=True, env=ray_env[0], timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert [(row["input"], row["status"]) for row in ledger(out)] == [
+        (str(clips["good"]), "done"), (str(clips["empty"]), "failed"), (str(clips["corrupt"]), "failed")]
+    assert files_with_times(out) == before
+
+
 def stopped_mid_video(out: Path, env: dict, stop: int, *args: str, while_running=lambda batch: None):
     """``jaxmocap batch CLIP ARGS`` on frames 20-100 (twenty chunks of the same shapes, so that the video is still
     running when the signal comes: with frames 20-60, a suite run on three workers once saw the video finish first),

@@ -35,6 +35,41 @@ print(len(traced), float(jnp.sum(out.body_pose)), float(jnp.sum(out.betas)), out
 """
 
 
+# Where a process's compile caches go after `use_compilation_cache`, and the modes of the folders it made.
+_CACHE_USED = """
+import os, stat, sys, jax
+from jaxmocap.compile_cache import _programs, use_compilation_cache
+use_compilation_cache()
+root = os.environ["JAXMOCAP_CACHE"]
+modes = {name: oct(stat.S_IMODE(os.stat(os.path.join(root, *name.split("/"))).st_mode))
+         for name in ("", "xla", "xla/jaxmocap-programs") if os.path.exists(os.path.join(root, *name.split("/")))}
+print(jax.config.jax_compilation_cache_dir, _programs[0], modes)
+"""
+
+
+def test_cache_folders_are_private_and_one_others_can_write_is_not_loaded(tmp_path):
+    """Compiled programs are loaded as code: the caches are made readable by their user alone (0700), and a cache
+    folder a group or others may write to is not used (one line on stderr; programs compile anew)."""
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+
+    def used(root):
+        out = subprocess.run([sys.executable, "-c", _CACHE_USED], env=env | {"JAXMOCAP_CACHE": str(root)},
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stderr[-2000:]
+        return out.stdout.split(" ", 2), out.stderr
+
+    (folder, programs, modes), stderr = used(tmp_path / "new" / "cache")
+    assert folder == str(tmp_path / "new" / "cache" / "xla") and programs == f"{folder}/jaxmocap-programs"
+    assert modes.strip() == str({"": "0o700", "xla": "0o700", "xla/jaxmocap-programs": "0o700"}) and not stderr
+    for shared in (tmp_path / "shared", tmp_path / "shared_xla" / "xla"):
+        shared.mkdir(parents=True)
+        shared.chmod(0o777)  # another user could put programs here
+        root = shared if shared.name == "shared" else shared.parent
+        (folder, programs, _), stderr = used(root)
+        assert (folder, programs) == ("None", "None"), (shared, folder)
+        assert len(stderr.splitlines()) == 1 and "writable by other users" in stderr and str(shared) in stderr
+
+
 def test_a_new_process_reads_the_program_back_instead_of_tracing_it(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"} | {"JAXMOCAP_CACHE": str(tmp_path)}
     runs = [subprocess.run([sys.executable, "-c", _TWO_PROCESSES], env=env, capture_output=True, text=True)

@@ -65,11 +65,27 @@ def ledger_texts(records: list[VideoRecord]) -> dict[str, str]:
     return {"batch.json": json.dumps({"videos": rows}, indent=2) + "\n", "batch.csv": table.getvalue()}
 
 
+def read_ledger(out_dir: Path) -> list[VideoRecord]:
+    """The records of ``out_dir/batch.json`` (none where it is missing or unreadable)."""
+    try:
+        return [VideoRecord(**row) for row in json.loads((Path(out_dir) / "batch.json").read_text())["videos"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+
+
+def merged(earlier: list[VideoRecord], records: list[VideoRecord]) -> list[VideoRecord]:
+    """``earlier`` records with each of ``records`` in place of the one of its output folder, the others after."""
+    new = {r.out: r for r in records}
+    kept = [new.pop(r.out, r) for r in earlier]
+    return kept + [r for r in records if r.out in new]
+
+
 def write_ledger(out_dir: Path, records: list[VideoRecord]) -> list[Path]:
-    """``out_dir/batch.json`` and ``batch.csv``, each written atomically and only where its text changed; the
-    paths written."""
+    """``out_dir/batch.json`` and ``batch.csv`` of every video the folder has seen: what the ledger held, with
+    ``records`` in place of their videos' earlier records (a video keeps its last status and error until it is
+    run again), each file written atomically and only where its text changed; the paths written."""
     written = []
-    for name, text in ledger_texts(records).items():
+    for name, text in ledger_texts(merged(read_ledger(out_dir), records)).items():
         path = Path(out_dir) / name
         if not path.is_file() or path.read_text() != text:
             written.append(atomic_write_text(path, text))

@@ -21,7 +21,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from smplx_jax.default_model import cache_root
+from smplx_jax.default_model import cache_root, private_folder
 from smplx_jax.model_file import ModelFileError
 
 from ..io import atomic_path, file_sha256
@@ -116,7 +116,7 @@ def _download_wheel(tmp: str) -> Path:
 
 def _fetch_into(target: Path) -> None:
     """Download the wheel once and atomically place every missing model file in ``target``."""
-    target.mkdir(parents=True, exist_ok=True)
+    private_folder(target)
     with tempfile.TemporaryDirectory(prefix="jaxmocap-wheel-") as tmp:
         wheel = _download_wheel(tmp)
         with zipfile.ZipFile(wheel) as zf:
@@ -137,7 +137,7 @@ def _npm_fetch_into(target: Path) -> None:
            f"$JAXMOCAP_MEDIAPIPE_DIR")
     if npm is None:
         raise ModelFetchError(f"cannot fetch BlazePose heavy and lite (npm not found on PATH); {how}")
-    target.mkdir(parents=True, exist_ok=True)
+    private_folder(target)
     with tempfile.TemporaryDirectory(prefix="jaxmocap-npm-") as tmp:
         cmd = [npm, "pack", NPM_PACKAGE, "--pack-destination", tmp, "--cache", str(Path(tmp) / "cache"),
                "--ignore-scripts", "--silent"]
