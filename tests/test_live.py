@@ -410,6 +410,44 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
     assert read_motion(tmp_path / "motion.npz")["valid"].sum() >= 10
 
 
+def test_a_stalled_stream_stops_within_seconds_of_ctrl_c(tmp_path):
+    """A network source that stops sending, its connection left open (a read that never returns: here an MJPEG
+    stream of grey frames that stalls), cannot keep the session alive: Ctrl-C ends it within 5 s, cleanly."""
+    import cv2
+
+    image = cv2.imencode(".jpg", np.full((240, 320, 3), 90, np.uint8))[1].tobytes()
+    stream, sending = Viewer("127.0.0.1", 0), threading.Event()
+    sending.set()
+
+    def send():
+        while not stream.closed:
+            if sending.is_set():
+                stream.publish(image)
+            time.sleep(1 / 30)
+
+    threading.Thread(target=send, daemon=True).start()
+    command = cli_as_from_a_terminal("live", f"http://127.0.0.1:{stream.port}/stream.mjpg", "--mode", "hands",
+                                     "--record", str(tmp_path), "--quiet")
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        while "capturing" not in line:
+            line = process.stderr.readline()
+            assert line or process.poll() is None, process.stderr.read()
+        time.sleep(1.0)
+        sending.clear()  # the stream stalls: the source's read blocks
+        time.sleep(2.0)
+        asked = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=60)
+        seconds = time.monotonic() - asked
+    finally:
+        process.kill()
+        stream.close()
+    assert process.returncode == 0 and out.startswith("interrupted: "), err
+    assert seconds < 5.0 and (tmp_path / "hands.npz").is_file(), seconds
+
+
 def test_stopping_is_sheltered_from_a_second_ctrl_c_or_sigterm():
     """While a session stops (its recording written), Ctrl-C and SIGTERM do nothing; the handlers are back after.
     (The test's handlers fail it if a signal reaches them inside.)"""

@@ -111,6 +111,10 @@ class LiveReport:
 
 
 _VERTICES = jax.jit(lambda model, params: smplx_jax.forward(model, params).vertices)
+# Seconds a stop waits for each thread: time to finish the frame in hand (a frame's detection, solve or drawing
+# takes a fraction of it); one still running is blocked in its source (a stalled stream's read never returns) and
+# is left behind, a daemon thread, rather than keep the process alive.
+STOP_SECONDS = 2.0
 
 
 class Session:
@@ -246,11 +250,11 @@ class Session:
         except KeyboardInterrupt:
             stopped = "interrupted"
         with _sheltered():  # a second Ctrl-C (or SIGTERM) while stopping must not lose the recording
-            self.source.stop()
+            self.source.stop(STOP_SECONDS)
             self.detected.close()
             self.shown.close()
             for thread in threads:
-                thread.join()
+                thread.join(STOP_SECONDS)
             self.close()
             if self.config.progress:
                 print(file=sys.stderr)

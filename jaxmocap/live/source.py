@@ -54,10 +54,12 @@ class LiveSource:
         self._thread.start()
         return self
 
-    def stop(self) -> None:
+    def stop(self, timeout: float) -> None:
+        """Ends the reading within ``timeout`` seconds, or leaves it behind (a daemon thread): a stalled stream's
+        read may never return."""
         self._stop.set()
         self.frames.close()
-        self._thread.join()
+        self._thread.join(timeout)
 
     def _run(self) -> None:
         start, played, image, this_play = time.perf_counter(), 0, self._first, 0
