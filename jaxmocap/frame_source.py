@@ -42,11 +42,23 @@ def read_image(path) -> np.ndarray:
     return image
 
 
+# Seconds of silence after which a network stream has ended: a camera sends several frames a second, and a read
+# that never returns would otherwise hold its thread (and the process) for ever.
+STREAM_TIMEOUT_S = 3.0
+
 def capture(source) -> cv2.VideoCapture:
-    """An opened `cv2.VideoCapture` of a webcam index, a stream URL or a video file, or `MediaError`."""
+    """An opened `cv2.VideoCapture` of a webcam index, a stream URL or a video file, or `MediaError`. A stream
+    that sends nothing for `STREAM_TIMEOUT_S` (opening it, or between frames) has ended: its read returns no frame."""
     if not str(source).isdigit() and "://" not in str(source) and not Path(source).exists():
         raise MediaError(f"input {source} does not exist")
-    cap = cv2.VideoCapture(int(source)) if str(source).isdigit() else cv2.VideoCapture(str(source))
+    if str(source).isdigit():
+        cap = cv2.VideoCapture(int(source))
+    elif "://" in str(source):
+        timeout_ms = int(1000 * STREAM_TIMEOUT_S)
+        cap = cv2.VideoCapture(str(source), cv2.CAP_ANY, [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, timeout_ms,
+                                                          cv2.CAP_PROP_READ_TIMEOUT_MSEC, timeout_ms])
+    else:
+        cap = cv2.VideoCapture(str(source))
     if not cap.isOpened():
         if str(source).isdigit():
             raise MediaError(f"cannot open webcam {source} (no camera with that index, or it is busy)")

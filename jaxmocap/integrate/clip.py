@@ -48,7 +48,7 @@ from jaxmocap.integrate import keypoints as keypoint_map
 from jaxmocap.integrate.clip_solver import ClipLevenbergMarquardt, Step
 from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.integrate.keypoints import KeypointModel, params_of
-from jaxmocap.integrate.least_squares import BEND_LIMITS, FINGER_JOINTS, bend_of
+from jaxmocap.integrate.least_squares import BEND_LIMITS, FINGER_JOINTS, bend_of, log1p_ratio
 from smplx_jax import BodyModel, SMPLXParams
 from smplx_jax.rotations import quat_product, quat_to_rotvec, rotvec_to_quat
 
@@ -142,7 +142,7 @@ def full_pose(pose: Float[Array, "52 3"], fixed: Float[Array, "3 3"]) -> Float[A
     return jnp.concatenate([pose[:22], fixed, pose[22:]])
 
 
-def _prior_sigma_rad(config: ClipConfig) -> np.ndarray:
+def prior_sigma_rad(config: ClipConfig) -> np.ndarray:
     """``(55, 3)`` the standard deviation of each joint's rotation from rest (radians; inf: no prior):
     none for the global orientation, ``pose_sigma_deg`` for the rest, ``hinge_sigma_deg`` for the index to ring
     fingers' twist about the bone (x in the rest pose) and sideways bending (y) but at the knuckle."""
@@ -153,13 +153,6 @@ def _prior_sigma_rad(config: ClipConfig) -> np.ndarray:
         sigma[fingers, 0] = np.radians(config.hinge_sigma_deg)
         sigma[fingers[np.asarray(FINGER_JOINTS) % 3 > 0], 1] = np.radians(config.hinge_sigma_deg)
     return sigma
-
-
-def _log1p_ratio(u):
-    """``log1p(u) / u``, smooth at zero."""
-    small = u < 1e-3
-    us = jnp.where(small, 1.0, u)
-    return jnp.where(small, 1.0 - u / 2 + u * u / 3 - u**3 / 4, jnp.log1p(us) / us)
 
 
 def points_3d(km: KeypointModel, pose: Float[Array, "55 3"], betas, transl) -> Float[Array, "67 3"]:
@@ -230,7 +223,7 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
     error, off = _observed_errors(x, data, config)
     if weighed_at is None:
         u, v = (jnp.sum(e * e, -1) / config.cauchy**2 for e in (error, off))
-        robust = [jnp.sqrt(_log1p_ratio(u)), jnp.sqrt(_log1p_ratio(v))]
+        robust = [jnp.sqrt(log1p_ratio(u)), jnp.sqrt(log1p_ratio(v))]
     else:
         robust = [jnp.sqrt(w) for w in _cauchy_weights(keypoints_3d(weighed_at, data), data, config)]
     weight = jnp.sqrt(data.confidence * data.found[:, None])
@@ -238,7 +231,7 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
     direction = (jnp.sqrt(data.direction_weight * data.found[:, None]) * robust[1])[..., None] * off
     pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
     limits = jax.nn.relu(jax.vmap(bend_of)(pose)) / np.radians(config.limit_sigma_deg)
-    prior = y.pose_rotvecs / _prior_sigma_rad(config)[list(SOLVED_JOINTS)]
+    prior = y.pose_rotvecs / prior_sigma_rad(config)[list(SOLVED_JOINTS)]
     lost = 1.0 - data.found
     hold = jnp.concatenate([lost[:, None, None] * (y.pose_rotvecs - data.start.pose_rotvecs),
                             lost[:, None, None] * (y.transl - data.start.transl)[:, None]], 1)
@@ -316,7 +309,7 @@ class ClipBlocks(NamedTuple):
         return apply
 
 
-def _inverse3(m: Float[Array, "... 3 3"]) -> Float[Array, "... 3 3"]:
+def inverse3(m: Float[Array, "... 3 3"]) -> Float[Array, "... 3 3"]:
     """The inverses of 3x3 matrices (`mat3.inverse`: cofactors, no LAPACK)."""
     columns = jnp.moveaxis(m.reshape(-1, 3, 3), 0, -1)
     return jnp.moveaxis(mat3.inverse(columns), -1, 0).reshape(m.shape)
@@ -416,12 +409,12 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
               / (np.radians(config.direction_sigma_deg) * length) ** 2)
     bone_metric = weight[..., None, None] * (eye - unit[..., :, None] * unit[..., None, :])
     # the priors, limits and holds act on the axis-angle, which moves by J_l(theta)^-1 per local increment
-    to_theta = _inverse3(mat3.left_jacobian(pose))  # (T, 55, 3, 3)
+    to_theta = inverse3(mat3.left_jacobian(pose))  # (T, 55, 3, 3)
     bend_joints, bend_axes = ([limit[i] for limit in BEND_LIMITS] for i in (0, 1))
     bend = jnp.zeros((pose.shape[0], 55, 3), pose.dtype).at[:, bend_joints, bend_axes].add(
         (jax.vmap(bend_of)(pose) > 0) / np.radians(config.limit_sigma_deg) ** 2)
     lost = 1.0 - data.found
-    axis_weight = bend + jnp.asarray(_prior_sigma_rad(config) ** -2, pose.dtype) + lost[:, None, None]
+    axis_weight = bend + jnp.asarray(prior_sigma_rad(config) ** -2, pose.dtype) + lost[:, None, None]
     bones = tuple(np.asarray(side) for side in zip(*BONES))
     diagonal, hands, jacobian, arm_jacobians, hand_jacobians = jax.vmap(
         _frame_blocks, in_axes=(None, 0, 0, 0, 0, 0, 0, 0))(km, lin, image, motion, bone_metric, axis_weight,

@@ -18,8 +18,9 @@ with the same standard deviations (`ClipConfig`):
   distance), m/s^2, and the 16 rotations' angular accelerations, rad/s^2.
 
 Frames where the hand is not ``found`` hold their start and weigh nothing. Solved by `ClipLevenbergMarquardt`,
-preconditioned by the exact Gauss-Newton blocks of each frame and of its coupling to the frames beside it
-(`banded`; 51 unknowns a frame). Work and memory are linear in the number of frames.
+preconditioned by the Gauss-Newton matrix's blocks (`banded`; 51 unknowns a frame): each frame's, of its own
+residuals (the fingertips' blended skinning left out), and the accelerations' between frames one and two apart.
+Work and memory are linear in the number of frames.
 """
 
 from __future__ import annotations
@@ -30,22 +31,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, ArrayLike, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from jaxmocap.integrate import banded, mat3
 from jaxmocap.integrate import keypoints as keypoint_map
-from jaxmocap.integrate.clip import (
-    HAND_BONES,
-    ClipConfig,
-    _inverse3,
-    _log1p_ratio,
-    _prior_sigma_rad,
-    motion_residuals,
-)
+from jaxmocap.integrate.clip import HAND_BONES, ClipConfig, inverse3, motion_residuals, prior_sigma_rad
 from jaxmocap.integrate.clip_solver import ClipLevenbergMarquardt, Step
 from jaxmocap.integrate.hand_fit import hand_keypoint_model, side_indices
 from jaxmocap.integrate.keypoints import KeypointModel, keypoints_cm
-from jaxmocap.integrate.least_squares import bend_of
+from jaxmocap.integrate.least_squares import bend_of, log1p_ratio
 from smplx_jax import BodyModel
 
 JOINTS = 16  # the wrist, then the 15 finger joints in SMPL-X's order
@@ -91,7 +85,7 @@ class HandClipResult(NamedTuple):
     camera_trans: Float[Array, "T 2"]
     reprojection_error_px: Float[Array, "T"]
     converged: Bool[Array, ""]
-    steps: Float[Array, ""]
+    steps: Int[Array, ""]
 
 
 def _full_pose(left, pose: Float[Array, "16 3"]) -> Float[Array, "55 3"]:
@@ -139,12 +133,12 @@ def _frame_residuals(pose, camera, x, obs, data: HandClipData, config: ClipConfi
     ``weights`` Cauchy's of its keypoints and bones held (None: the robust errors themselves)."""
     _, confidence, _, _, direction_weight, found, start_pose, start_camera = obs
     errors = _errors(x, camera, obs, config)
-    robust = ([jnp.sqrt(_log1p_ratio(u)) for u in _cauchy(errors, config)] if weights is None
+    robust = ([jnp.sqrt(log1p_ratio(u)) for u in _cauchy(errors, config)] if weights is None
               else [jnp.sqrt(w) for w in weights])
     reprojection = (jnp.sqrt(confidence * found) * robust[0])[:, None] * errors[0]
     direction = (jnp.sqrt(direction_weight * found) * robust[1])[:, None] * errors[1]
     limits = jax.nn.relu(bend_of(_full_pose(data.left, pose))) / np.radians(config.limit_sigma_deg)
-    prior = pose[1:] / _prior_sigma_rad(config)[25:40]
+    prior = pose[1:] / prior_sigma_rad(config)[25:40]
     hold = (1.0 - found) * jnp.concatenate([(pose - start_pose).ravel(), camera - start_camera])
     return jnp.concatenate([reprojection.ravel(), direction.ravel(), limits, prior.ravel(), hold])
 
@@ -219,15 +213,16 @@ class HandBlocks(NamedTuple):
 
 
 def hand_preconditioner(y: HandClipUnknowns, data: HandClipData, config: ClipConfig) -> HandBlocks:
-    """Blocks of the Gauss-Newton matrix of the residuals reweighted at ``y`` (`residuals`): each frame's, exact
-    for its own residuals, and the accelerations' between frames one and two apart, from each frame's keypoints'
-    Jacobian (the rotations' turns taken as their increments, as `clip.preconditioner`)."""
+    """Blocks of the Gauss-Newton matrix of the residuals reweighted at ``y`` (`residuals`): each frame's, of its
+    own residuals (the fingertips' blended skinning left out), and the accelerations' between frames one and two
+    apart, from each frame's keypoints' Jacobian (the rotations' turns taken as their increments, as
+    `clip.preconditioner`)."""
     weights = cauchy_weights(y, data, config)
     zero = jnp.zeros(UNKNOWNS, y.transl.dtype)
 
     def frame(pose, camera, obs, w):
         x, dx = _linearized_points(data.km, data.left, pose)
-        to_theta = _inverse3(mat3.left_jacobian(pose))  # each axis-angle's change per local increment
+        to_theta = inverse3(mat3.left_jacobian(pose))  # each axis-angle's change per local increment
 
         def of(step):  # the frame's residuals and keypoints, to first order in the step
             turn = step[:3 * JOINTS]

@@ -131,7 +131,7 @@ def prior_weights(config: SolverConfig) -> np.ndarray:
     return prior
 
 
-def _log1p_ratio(u):
+def log1p_ratio(u):
     """``log1p(u) / u``, smooth at zero."""
     small = u < 1e-3
     us = jnp.where(small, 1.0, u)
@@ -174,7 +174,7 @@ def residuals(y: Unknowns, problem: Problem, config: SolverConfig) -> Residuals:
     pose, betas = pose_and_shape(y, problem)
     r = project(keypoints.keypoints_cm(problem.km, pose, betas), y.camera, problem)[0] - problem.target.T
     sref = problem.scale_ref
-    return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(_log1p_ratio(cauchy_u(r, problem, config))),
+    return Residuals(_sqrt_weight(problem.conf) * r * jnp.sqrt(log1p_ratio(cauchy_u(r, problem, config))),
                      sref * problem.prior * (pose - problem.pose0), sref * config.prior_betas * betas,
                      sref * bend_weights(config, pose.dtype) * jax.nn.relu(bend_of(pose)))
 

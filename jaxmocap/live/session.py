@@ -26,6 +26,7 @@ from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import LANDMARK_MODELS, available_landmarks
 from jaxmocap.errors import InputError
+from jaxmocap.frame_source import STREAM_TIMEOUT_S
 from jaxmocap.io import file_sha256
 from jaxmocap.live.causal import CausalSolver, LiveSettings, Solved
 from jaxmocap.live.mailbox import Closed, Mailbox
@@ -112,9 +113,10 @@ class LiveReport:
 
 _VERTICES = jax.jit(lambda model, params: smplx_jax.forward(model, params).vertices)
 # Seconds a stop waits for each thread: time to finish the frame in hand (a frame's detection, solve or drawing
-# takes a fraction of it); one still running is blocked in its source (a stalled stream's read never returns) and
-# is left behind, a daemon thread, rather than keep the process alive.
-STOP_SECONDS = 2.0
+# takes a fraction of it) or for a stalled stream's read to time out (`frame_source.STREAM_TIMEOUT_S`: a read still
+# pending as the process exits can crash it); a thread still running after it is left behind, a daemon thread,
+# rather than keep the process alive.
+STOP_SECONDS = STREAM_TIMEOUT_S + 1.0
 
 
 class Session:

@@ -211,8 +211,8 @@ def whole_table(chunks: list[HandChunk]) -> dict[str, np.ndarray]:
 
 def side_arrays(table: dict[str, np.ndarray], frames: int, fit=None) -> dict[str, np.ndarray]:
     """hands.npz's per-side arrays over ``frames`` frames: in each frame the side's likeliest hand (highest
-    presence) of the table; each side's frames fitted as one (``fit``, `fitted_side` but for its side, arrays and
-    3D landmarks; None: each frame's own fit)."""
+    presence) of the table; each side's frames fitted as one by ``fit(side, arrays, world)`` (`fitted_side` with
+    its model, lens and frame rate given; None: each frame's own fit)."""
     out = {}
     for k, side in enumerate(SIDES):
         arrays = {name: np.zeros((frames,) + shape, bool if name == "valid" else np.float32)
