@@ -30,22 +30,27 @@ def use_compilation_cache() -> None:
     one-line warning; programs compile anew)."""
     from smplx_jax.default_model import cache_root, open_to_others, private_folder
 
-    if jax.config.jax_compilation_cache_dir is None:
-        private_folder(cache_root())
-        jax.config.update("jax_compilation_cache_dir", str(private_folder(cache_root() / "xla")))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-        jax.config.update("jax_compilation_cache_max_size", 1 << 30)
-    folder = Path(jax.config.jax_compilation_cache_dir)
-    programs = private_folder(folder / "jaxmocap-programs")
+    folder = Path(jax.config.jax_compilation_cache_dir or cache_root() / "xla")
+    try:
+        programs = private_folder(folder / "jaxmocap-programs")
+    except OSError as err:  # a read-only or full disk: no cache, programs compile anew
+        return _without_cache(f"cannot make {folder}/jaxmocap-programs ({err.strerror})")
     guarded = (folder, programs) + ((cache_root(),) if folder == cache_root() / "xla" else ())
     exposed = next((path for path in guarded if open_to_others(path)), None)
     if exposed is not None:
-        print(f"jaxmocap: not using the compile cache {folder}: {exposed} is writable by other users (programs "
-              "compile anew)", file=sys.stderr)
-        jax.config.update("jax_compilation_cache_dir", None)
-        keep_lowered_programs(None)
-        return
+        return _without_cache(f"{exposed} is writable by other users")
+    if jax.config.jax_compilation_cache_dir is None:
+        jax.config.update("jax_compilation_cache_dir", str(folder))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        jax.config.update("jax_compilation_cache_max_size", 1 << 30)
     keep_lowered_programs(programs)
+
+
+def _without_cache(why: str) -> None:
+    """No compile cache in this process (one line on stderr saying ``why``): every program compiles anew."""
+    print(f"jaxmocap: not using the compile cache: {why} (programs compile anew)", file=sys.stderr)
+    jax.config.update("jax_compilation_cache_dir", None)
+    keep_lowered_programs(None)
 
 
 def keep_lowered_programs(folder: Path | None) -> None:
