@@ -379,15 +379,21 @@ def test_frames_are_dropped_not_queued_when_the_solve_is_slowed(monkeypatch):
 
 
 # -- the command ------------------------------------------------------------------------------------------------------
+def _capturing(process: subprocess.Popen) -> str:
+    """The live command's start line (``live: capturing ...``), once its stderr says so; fails if it ends first."""
+    line = ""
+    while "capturing" not in line:
+        line = process.stderr.readline()
+        assert line or process.poll() is None, process.stderr.read()
+    return line
+
+
 def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp_path):
     command = cli_as_from_a_terminal("live", str(CLIP), "--realtime", "--loop", "0", "--serve", "0", "--record",
                                      str(tmp_path), "--quiet", python_options=("-X", "faulthandler"))
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        line = ""
-        while "capturing" not in line:
-            line = process.stderr.readline()
-            assert line or process.poll() is None, process.stderr.read()
+        line = _capturing(process)
         port = int(line.rsplit(":", 1)[1].split("/")[0])
         assert "http://127.0.0.1:" in line and _listening_on(port) == ["127.0.0.1"]  # this machine only
         deadline = time.monotonic() + 120  # until 10 frames are solved (the page's stats, once a second)
@@ -431,10 +437,7 @@ def test_a_stalled_stream_stops_within_seconds_of_ctrl_c(tmp_path):
                                      "--record", str(tmp_path), "--quiet")
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        line = ""
-        while "capturing" not in line:
-            line = process.stderr.readline()
-            assert line or process.poll() is None, process.stderr.read()
+        _capturing(process)
         time.sleep(1.0)
         sending.clear()  # the stream stalls: the source's read blocks (until its timeout, 3 s)
         time.sleep(1.0)
