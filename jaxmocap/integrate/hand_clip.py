@@ -169,25 +169,23 @@ def residuals(y: HandClipUnknowns, data: HandClipData, config: ClipConfig,
     """Every residual of the clip (module docstring); with ``weighed_at``, the robust errors scaled by Cauchy's
     weights there (iteratively reweighted, as `clip.residuals`)."""
     weights = None if weighed_at is None else cauchy_weights(weighed_at, data, config)
-    frames = jax.vmap(lambda p, c, o, w: _frame_residuals(p, c, _hand_points(data.km, data.left, p), o, data, config,
-                                                          w),
-                      in_axes=(0, 0, 0, None if weights is None else 0))(
-        y.pose_rotvecs, y.transl, _observed(data), weights)
-    return frames, _motion(y, data, config)
+    x = jax.vmap(lambda p: _hand_points(data.km, data.left, p))(y.pose_rotvecs)
+    frames = jax.vmap(lambda p, c, x, o, w: _frame_residuals(p, c, x, o, data, config, w),
+                      in_axes=(0, 0, 0, 0, None if weights is None else 0))(
+        y.pose_rotvecs, y.transl, x, _observed(data), weights)
+    moving = jax.vmap(lambda x, c: _camera_points(x, c, data))(x, y.transl)
+    return frames, motion_residuals(moving, y.pose_rotvecs, _motion_rows(data.found), data.fps, config)
 
 
-def _motion(y: HandClipUnknowns, data: HandClipData, config: ClipConfig) -> Float[Array, "T M"]:
-    x = jax.vmap(lambda p, c: _camera_points(_hand_points(data.km, data.left, p), c, data))(y.pose_rotvecs,
-                                                                                           y.transl)
-    return motion_residuals(x, y.pose_rotvecs, _motion_rows(data.found), data.fps, config)
+def _weights(x, camera, obs, config: ClipConfig):
+    """Cauchy's weight ``1 / (1 + u)`` of one frame's keypoints (21,) and bones (20,), its keypoints at ``x``."""
+    return tuple(1.0 / (1.0 + u) for u in _cauchy(_errors(x, camera, obs, config), config))
 
 
 def cauchy_weights(y: HandClipUnknowns, data: HandClipData, config: ClipConfig):
     """Cauchy's weight ``1 / (1 + u)`` of each frame's keypoints ``(T, 21)`` and bones ``(T, 20)`` at ``y``."""
-    def one(pose, camera, obs):
-        return tuple(1.0 / (1.0 + u) for u in _cauchy(_errors(_hand_points(data.km, data.left, pose), camera, obs,
-                                                              config), config))
-    return jax.vmap(one)(y.pose_rotvecs, y.transl, _observed(data))
+    return jax.vmap(lambda p, c, o: _weights(_hand_points(data.km, data.left, p), c, o, config))(
+        y.pose_rotvecs, y.transl, _observed(data))
 
 
 class HandBlocks(NamedTuple):
@@ -217,11 +215,11 @@ def hand_preconditioner(y: HandClipUnknowns, data: HandClipData, config: ClipCon
     own residuals (the fingertips' blended skinning left out), and the accelerations' between frames one and two
     apart, from each frame's keypoints' Jacobian (the rotations' turns taken as their increments, as
     `clip.preconditioner`)."""
-    weights = cauchy_weights(y, data, config)
     zero = jnp.zeros(UNKNOWNS, y.transl.dtype)
 
-    def frame(pose, camera, obs, w):
+    def frame(pose, camera, obs):
         x, dx = _linearized_points(data.km, data.left, pose)
+        w = _weights(x, camera, obs, config)
         to_theta = inverse3(mat3.left_jacobian(pose))  # each axis-angle's change per local increment
 
         def of(step):  # the frame's residuals and keypoints, to first order in the step
@@ -232,7 +230,7 @@ def hand_preconditioner(y: HandClipUnknowns, data: HandClipData, config: ClipCon
         residual, points = jax.jacfwd(of)(zero)
         return residual.T @ residual, points.reshape(-1, UNKNOWNS)
 
-    own, points = jax.vmap(frame)(y.pose_rotvecs, y.transl, _observed(data), weights)
+    own, points = jax.vmap(frame)(y.pose_rotvecs, y.transl, _observed(data))
     rows = _motion_rows(data.found)[:, 0]
     turn = jnp.diag((jnp.arange(UNKNOWNS) < 3 * JOINTS).astype(own.dtype)) * (
         data.fps**2 / config.angular_acceleration_sigma) ** 2
