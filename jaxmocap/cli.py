@@ -266,7 +266,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--udp", default=None, metavar="HOST:PORT",
                    help="send each frame's SMPL-X parameters as a JSON line (docs/formats.md, \"Live stream\")")
     p.add_argument("--record", type=Path, default=None, metavar="DIR",
-                   help="write DIR/motion.npz (and DIR/people/<id>/motion.npz) at the end")
+                   help="write DIR/motion.npz (and DIR/people/<id>/motion.npz; DIR/hands.npz with --mode hands) as it "
+                        "goes: the frames so far every few seconds, the rest at the end")
     p.add_argument("--max-people", type=int, default=1, metavar="N", help="people tracked at most (default: 1)")
     p.add_argument("--frames", type=int, default=None, metavar="N", help="stop after N frames solved")
     p.add_argument("--model", type=Path, default=None, help="SMPL-X model file (default: the built-in model)")

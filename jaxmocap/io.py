@@ -12,7 +12,7 @@ from jaxmocap.errors import InputError
 from smplx_jax.io import atomic_path, atomic_write_bytes, atomic_write_text, remove_abandoned
 
 __all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "file_sha256", "read_result_npz",
-           "remove_abandoned", "write_result_npz"]
+           "remove_abandoned", "result_arrays", "write_result_npz"]
 
 
 def file_sha256(path) -> str:
@@ -23,14 +23,19 @@ def file_sha256(path) -> str:
     return h.hexdigest()
 
 
-def write_result_npz(path, arrays: dict, bools: tuple[str, ...]) -> Path:
-    """A result file (motion.npz, hands.npz) written atomically: float64 values as float32 (but ``fps``), the
-    ``bools`` keys as bool, ``model_sha256`` as a string."""
+def result_arrays(arrays: dict, bools: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """A result file's arrays as stored: float64 values as float32 (but ``fps``), the ``bools`` keys (those
+    present) as bool, ``model_sha256`` (if present) as a string."""
     out = {k: np.asarray(v).astype(np.float32) if np.asarray(v).dtype == np.float64 and k != "fps" else np.asarray(v)
            for k, v in arrays.items()}
-    out |= {k: np.asarray(arrays[k], bool) for k in bools} | {"model_sha256": np.asarray(str(arrays["model_sha256"]))}
+    out |= {k: np.asarray(arrays[k], bool) for k in bools if k in arrays}
+    return out | ({"model_sha256": np.asarray(str(arrays["model_sha256"]))} if "model_sha256" in arrays else {})
+
+
+def write_result_npz(path, arrays: dict, bools: tuple[str, ...]) -> Path:
+    """A result file (motion.npz, hands.npz) written atomically, its arrays as `result_arrays` stores them."""
     buffer = io.BytesIO()
-    np.savez(buffer, **out)
+    np.savez(buffer, **result_arrays(arrays, bools))
     return atomic_write_bytes(path, buffer.getvalue())
 
 

@@ -33,6 +33,7 @@ from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
 from jaxmocap.live import LiveConfig, LiveSettings, causal, live, params_from_message
 from jaxmocap.live.causal import CausalSolver
 from jaxmocap.live.mailbox import Closed, Mailbox
+from jaxmocap.live.record import FLUSH_SECONDS
 from jaxmocap.live.session import Session
 from jaxmocap.live.source import LiveSource
 from jaxmocap.live.stream import frame_message, parse_address, person_message
@@ -414,6 +415,36 @@ def test_ctrl_c_stops_cleanly_with_the_page_served_and_the_recording_written(tmp
     assert process.returncode == 0, err
     assert out.startswith("interrupted: ") and "frames/s" in out
     assert read_motion(tmp_path / "motion.npz")["valid"].sum() >= 10
+
+
+def _rss_mb(pid: int) -> float:
+    """A process's resident memory (MB), from /proc."""
+    status = Path(f"/proc/{pid}/status").read_text()
+    return int(status.split("VmRSS:")[1].split()[0]) / 1024
+
+
+def test_a_recording_killed_keeps_all_but_its_last_seconds_and_its_memory_stays_flat(tmp_path):
+    """``--record`` of a file looping in real time, killed outright (SIGKILL) 45 s into capture: motion.npz holds
+    every frame up to the last flush (`FLUSH_SECONDS` before the kill at most, and the moments a frame takes to be
+    solved and written); the process's resident memory grows by 50 MB at most between 15 s and 45 s."""
+    command = cli_as_from_a_terminal("live", str(CLIP), "--realtime", "--loop", "0", "--record", str(tmp_path),
+                                     "--quiet")
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _capturing(process)
+        started = time.monotonic()
+        time.sleep(15)
+        early = _rss_mb(process.pid)
+        time.sleep(30)
+        late, seconds = _rss_mb(process.pid), time.monotonic() - started
+        process.kill()
+        process.wait(timeout=30)
+    finally:
+        process.kill()
+    motion = read_motion(tmp_path / "motion.npz")
+    assert motion["time_s"][-1] >= seconds - FLUSH_SECONDS - 2.0, (motion["time_s"][-1], seconds)
+    assert motion["valid"].mean() > 0.9
+    assert late - early <= 50, (early, late)
 
 
 def test_a_stalled_stream_stops_within_seconds_of_ctrl_c(tmp_path):

@@ -12,17 +12,24 @@ from jaxmocap.integrate.camera import project
 from smplx_jax import constants
 
 _OPENPOSE = np.asarray(constants.OPENPOSE67_FROM_SMPLX)
-_JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
+
+
+@jax.jit
+def _errors(model, params, scale, trans, keypoints, focal_length, principal_point):
+    joints = jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0))(model, params)[:, _OPENPOSE]
+    pix = project(joints, scale, trans, focal_length, principal_point)
+    seen = keypoints[..., 2] > 0
+    dist = jnp.where(seen, jnp.linalg.norm(pix - keypoints[..., :2], axis=-1), 0.0)
+    return dist.sum(1) / jnp.maximum(seen.sum(1), 1)
 
 
 def reprojection_errors(model, params, scale, trans, keypoints, focal_length=None, principal_point=None) -> np.ndarray:
     """Mean pixel distance per frame over keypoints with confidence > 0 (0 where none); the pinhole camera's
-    pixels when ``focal_length`` is given, else the weak-perspective camera's."""
-    joints = np.asarray(map_in_buckets(lambda chunk, _: _JOINTS(model, chunk), params, fitting.BUCKETS))[:, _OPENPOSE]
-    pix = np.asarray(project(joints, np.asarray(scale), np.asarray(trans), focal_length, principal_point))
-    seen = keypoints[..., 2] > 0
-    dist = np.where(seen, np.linalg.norm(pix - keypoints[..., :2], axis=-1), 0.0)
-    return (dist.sum(1) / np.maximum(seen.sum(1), 1)).astype(np.float32)
+    pixels when ``focal_length`` is given, else the weak-perspective camera's. One compiled program per bucket
+    (`fitting.BUCKETS`), whatever the number of frames."""
+    lens = (None, None) if focal_length is None else (np.float32(focal_length), np.asarray(principal_point, np.float32))
+    frames = jax.tree.map(lambda a: np.asarray(a, np.float32), (params, scale, trans, keypoints))
+    return map_in_buckets(lambda chunk, _: np.asarray(_errors(model, *chunk, *lens)), frames, fitting.BUCKETS)
 
 
 def fitted_motion(model, params: smplx_jax.SMPLXParams, camera_scale, camera_trans, valid, keypoints,
@@ -31,7 +38,7 @@ def fitted_motion(model, params: smplx_jax.SMPLXParams, camera_scale, camera_tra
     camera's ``focal_length`` and ``principal_point`` when given; invalid frames keep their parameters and get
     error 0."""
     valid = np.asarray(valid, bool)
-    scale, trans = jnp.asarray(camera_scale), jnp.asarray(camera_trans)
+    scale, trans = np.asarray(camera_scale, np.float32), np.asarray(camera_trans, np.float32)
     keypoints = np.asarray(keypoints, np.float32)
     errors = reprojection_errors(model, params, scale, trans, keypoints, focal_length, principal_point)
     pinhole = {} if focal_length is None else {"focal_length": np.asarray(focal_length, np.float32),

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 from typing import NamedTuple
 
 import jax
@@ -20,13 +19,14 @@ import smplx_jax
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.hand_tracker import SIDES, Hand, HandTracker
-from jaxmocap.hand_motion import hand_meshes, write_hands
+from jaxmocap.hand_motion import hand_meshes
 from jaxmocap.integrate.clip import ClipConfig
 from jaxmocap.integrate.hand_clip import HAND_CLIP, hand_clip_problem, hand_clip_start, solve_hand_clip
 from jaxmocap.integrate.hand_fit import HAND_FIT, HandFit, hand_fit_from, hand_ik_one, hand_keypoint_model, palm_start
 from jaxmocap.integrate.inverse_kinematics import IKConfig
 from jaxmocap.integrate.keypoints import KeypointModel
 from jaxmocap.live.causal import PAST, host
+from jaxmocap.live.record import FLUSH_SECONDS, Recording
 from jaxmocap.live.session import Session
 from jaxmocap.live.source import Frame
 from jaxmocap.live.stream import frame_message
@@ -173,35 +173,28 @@ def hand_entry(hand: Hand, fit: HandFit) -> dict:
             "keypoints_2d": np.round(hand.keypoints_2d, 2).tolist()}
 
 
-class HandRecorder:
-    """Collects each solved frame's hands (`add`) and writes ``hands.npz`` (`write`), with ``frame_index`` and
-    ``time_s`` of each row."""
+class HandRecorder(Recording):
+    """A hands session's frames (`add`: the source frame's number and time, its hands and their fits by
+    ``hand_id``) as ``hands.npz``, each frame's likeliest hand of each side."""
 
-    def __init__(self, model_sha256: str, fps: float, image_size: tuple[int, int]):
-        self.meta = {"fps": np.asarray(fps), "image_size": np.asarray(image_size),
-                     "model_sha256": np.asarray(model_sha256)}
-        self.frames: list[tuple[int, float]] = []
-        self.rows: list[dict] = []
+    bools = tuple(f"{side}_valid" for side in SIDES)
+    nothing = ([], {})
 
-    def add(self, frame: int, seconds: float, hands: list[Hand], solved: dict[int, HandFit]) -> None:
-        """One solved frame: the source frame's number and time, its hands and their fits by ``hand_id``."""
-        for hand in hands:
-            fit = solved[hand.hand_id]
-            self.rows.append({"frame": len(self.frames), "hand_id": hand.hand_id, "side": SIDES.index(hand.side),
-                              "keypoints_2d": hand.keypoints_2d, "world": hand.world, "score": hand.score,
-                              "box": hand.box} | {k: getattr(fit, k) for k in FIT_COLUMNS})
-        self.frames.append((frame, seconds))
+    def __init__(self, folder, model_sha256: str, fps: float, image_size: tuple[int, int],
+                 every_s: float = FLUSH_SECONDS):
+        super().__init__(folder, {"fps": np.asarray(fps), "image_size": np.asarray(image_size),
+                                  "model_sha256": np.asarray(model_sha256)}, every_s)
 
-    def write(self, folder: Path) -> list[Path]:
-        """``folder/hands.npz`` over the frames solved; nothing without a frame."""
-        if not self.frames:
-            return []
-        table = {k: np.asarray([r[k] for r in self.rows]).reshape((len(self.rows),) + shape)
-                 for k, shape in COLUMNS.items()}
-        hands = side_arrays(table, len(self.frames))  # as solved live, each frame causal
-        extra = {"frame_index": np.asarray([f for f, _ in self.frames], np.int64),
-                 "time_s": np.asarray([t for _, t in self.frames], np.float64)}
-        return [write_hands(Path(folder) / "hands.npz", hands | self.meta | extra)]
+    def _rows(self, frames, names):
+        rows = [{"frame": t, "hand_id": hand.hand_id, "side": SIDES.index(hand.side),
+                 "keypoints_2d": hand.keypoints_2d, "world": hand.world, "score": hand.score, "box": hand.box}
+                | {k: getattr(solved[hand.hand_id], k) for k in FIT_COLUMNS}
+                for t, (hands, solved) in enumerate(frames) for hand in hands]
+        table = {k: np.asarray([r[k] for r in rows]).reshape((len(rows),) + shape) for k, shape in COLUMNS.items()}
+        return {"hands": side_arrays(table, len(frames))}  # as solved live, each frame causal
+
+    def _write(self):
+        return [self._npz(self.folder / "hands.npz", "hands")]
 
 
 class HandSession(Session):
@@ -217,8 +210,8 @@ class HandSession(Session):
         self.solver = HandSolver(self.model, lens_of(self.source.size, config.focal_length))
         self.detector = HandTracker(static_image_mode=False, max_hands=config.max_hands,
                                     redetect_every=search_interval(self.source.fps))
-        self.recorder = None if config.record is None else HandRecorder(model_sha256, self.source.fps,
-                                                                         self.source.size)
+        self.recorder = None if config.record is None else HandRecorder(config.record, model_sha256,
+                                                                         self.source.fps, self.source.size)
 
     def warm_up(self) -> None:
         self.solver.warm_up()

@@ -30,7 +30,7 @@ from jaxmocap.frame_source import STREAM_TIMEOUT_S
 from jaxmocap.io import file_sha256
 from jaxmocap.live.causal import CausalSolver, LiveSettings, Solved
 from jaxmocap.live.mailbox import Closed, Mailbox
-from jaxmocap.live.record import Recorder
+from jaxmocap.live.record import CLOSE_SECONDS, Recorder
 from jaxmocap.live.source import Frame, LiveSource
 from jaxmocap.live.stream import UdpSender, frame_message, person_message
 from jaxmocap.live.viewer import Viewer
@@ -51,9 +51,9 @@ class LiveConfig:
     behind), else as fast as it is solved, every frame; ``loops``: times a file plays (0: until stopped).
     ``max_people``: people tracked at most. ``landmarks``: BlazePose's landmark model (``full`` where the one asked
     for cannot be fetched). ``serve``: the web page's port (None: no page) on ``host``; ``udp``:
-    ``(host, port)`` to send each frame's JSON line to; ``record``: a folder to write the motions to at the end (as
-    ``jaxmocap run`` does). ``max_frames``: stop after that many frames solved. ``view_height``: the page's frame
-    height in pixels.
+    ``(host, port)`` to send each frame's JSON line to; ``record``: a folder to write the motions to as they are
+    solved (as ``jaxmocap run`` does; `jaxmocap.live.record`). ``max_frames``: stop after that many frames
+    solved. ``view_height``: the page's frame height in pixels.
     """
 
     source: str | Path
@@ -135,13 +135,20 @@ class Session:
         self.detected, self.shown = Mailbox(), Mailbox()
         self.errors: list[BaseException] = []
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, self.noun: 0}
-        self._setup(file_sha256(model_path))
-        self.viewer = None
+        self.recorder = self.viewer = None
         try:
-            self.viewer = None if config.serve is None else Viewer(config.host, config.serve)
-        except OSError as err:
+            self._setup(file_sha256(model_path))
+            self.viewer = None if config.serve is None else self._viewer()
+        except BaseException:
             self.close()
-            raise InputError(f"--serve: cannot listen on {config.host}:{config.serve} ({err.strerror})") from None
+            raise
+
+    def _viewer(self) -> Viewer:
+        try:
+            return Viewer(self.config.host, self.config.serve)
+        except OSError as err:
+            raise InputError(f"--serve: cannot listen on {self.config.host}:{self.config.serve} "
+                             f"({err.strerror})") from None
 
     def _setup(self, model_sha256: str) -> None:
         """The detector, the solver and the recorder of the mode."""
@@ -152,14 +159,16 @@ class Session:
                                  redetect_every=search_interval(self.source.fps), landmarks=landmarks)
         self.tracker = IdentityTracker()
         self.recorder = None if config.record is None else Recorder(
-            self.model, model_sha256, self.lens, self.source.fps, self.source.size, landmarks)
+            config.record, self.model, model_sha256, self.lens, self.source.fps, self.source.size, landmarks)
 
     def close(self) -> None:
-        """Release the source, the page and the stream (all idempotent)."""
+        """Release the source, the page and the stream, then write the recording's last frames (all idempotent)."""
         self.source.capture.release()
         for closable in (self.viewer, self.sender):
             if closable is not None:
                 closable.close()
+        if self.recorder is not None:
+            self.recorder.close(CLOSE_SECONDS)
 
     def warm_up(self) -> None:
         """Compile the solve (and the viewer's mesh) before the first frame comes."""
@@ -251,6 +260,8 @@ class Session:
                 stopped = "max frames"
         except KeyboardInterrupt:
             stopped = "interrupted"
+        except BaseException as err:  # (the recording's writing failed) stopped as the other threads' errors
+            self.errors.append(err)
         with _sheltered():  # a second Ctrl-C (or SIGTERM) while stopping must not lose the recording
             self.source.stop(STOP_SECONDS)
             self.detected.close()
@@ -277,7 +288,7 @@ class Session:
                   f"{count} {self.noun}", end="", file=sys.stderr, flush=True)
 
     def _finish(self, latencies: list[float], stopped: str, seconds: float) -> LiveReport:
-        written = [] if self.recorder is None else self.recorder.write(self.config.record)
+        written = [] if self.recorder is None else self.recorder.written
         return LiveReport(self.source.read, len(latencies), self._dropped(), seconds, np.asarray(latencies), stopped,
                           written)
 
