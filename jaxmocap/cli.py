@@ -9,7 +9,7 @@ from pathlib import Path
 
 from jaxmocap.compile_cache import use_compilation_cache
 from jaxmocap.errors import InputError
-from jaxmocap.signals import Terminated, handling, interrupts_kept
+from jaxmocap.signals import Terminated, handling, interrupt_of, interrupts_kept
 
 
 @contextlib.contextmanager
@@ -347,10 +347,13 @@ def main(argv=None) -> int:
     with _sigterm_interrupts() as terminated, interrupts_kept():
         try:
             code = args.run(args)
-        except (InputError, ModelFileError, OSError) as err:
-            print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:  # `live` stops on Ctrl-C (or SIGTERM) by itself; elsewhere it interrupts
+        except BaseException as err:
+            if interrupt_of(err) is None:  # (an error raised by, or while stopping on, Ctrl-C: interrupted)
+                if not isinstance(err, (InputError, ModelFileError, OSError)):
+                    raise
+                print(f"jaxmocap {args.command}: error: {err}", file=sys.stderr)
+                return 2
+            # `live` stops on Ctrl-C (or SIGTERM) by itself; elsewhere it interrupts
             resume = "; run the same command again to resume" if args.command in ("run", "demo", "batch") else ""
             print(f"jaxmocap {args.command}: {'terminated' if terminated else 'interrupted'}{resume}",
                   file=sys.stderr)
@@ -358,8 +361,7 @@ def main(argv=None) -> int:
     return code or 0  # `batch`: 1 when a video failed
 
 
-if __name__ == "__main__":  # python -m jaxmocap.cli: as the `jaxmocap` command (`command`)
-    from jaxmocap.xla_options import configure_process
+if __name__ == "__main__":  # python -m jaxmocap.cli: the `jaxmocap` command (`command.main`)
+    from jaxmocap.command import main as command
 
-    configure_process()
-    sys.exit(main())
+    sys.exit(command())

@@ -1,12 +1,43 @@
 """The ``jaxmocap`` command's entry point: its process's settings (`xla_options.configure_process`) before anything
 loads NumPy's or SciPy's OpenBLAS or starts JAX, then the command line (`cli.main`). Importing the package, or
-`cli`, changes nothing in a process."""
+`cli`, changes nothing in a process.
+
+Ctrl-C or SIGTERM at any moment ends the process with 130 or 143 and one line, never a traceback: while it starts
+(an interrupt in a C extension's import comes out as an ImportError: `signals.interrupt_of`) as while it runs
+(`cli.main` stops each command cleanly). Once the command has ended, both are ignored while the process exits:
+Python's shutdown joins threads and runs exit callbacks, which an interrupt would break."""
+
+import signal
+import sys
+
+from jaxmocap.signals import Terminated, interrupt_of, interrupts_kept
 
 
 def main(argv=None) -> int:
-    from jaxmocap.xla_options import configure_process
+    signal.signal(signal.SIGTERM, _terminate)  # the process's own: `cli.main` puts it back after its own
+    try:
+        with interrupts_kept():
+            from jaxmocap.xla_options import configure_process
 
-    configure_process()
-    from jaxmocap.cli import main as cli_main
+            configure_process()
+            from jaxmocap.cli import main as cli_main
 
-    return cli_main(argv)
+            code = cli_main(argv)
+        _ended()  # the try's last step: an interrupt before it is caught below
+    except BaseException as err:
+        _ended()
+        signum = interrupt_of(err)
+        if signum is None:
+            raise
+        print(f"jaxmocap: {'terminated' if signum == signal.SIGTERM else 'interrupted'}", file=sys.stderr)
+        code = 128 + signum
+    return code
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def _ended() -> None:
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_IGN)

@@ -80,27 +80,38 @@ def _video(cap, start, end, stride) -> Iterator[tuple[int, np.ndarray]]:
         cap.release()
 
 
+PREFETCH_STOP_SECONDS = STREAM_TIMEOUT_S + 1.0  # the decoding thread's end: a frame's decoding or a stream's timeout
+
+
 def _prefetch(frames: Iterator, depth: int = 8) -> Iterator:
-    """The same items, decoded ahead in a background thread (decoding overlaps the work on earlier frames)."""
+    """The same items, decoded ahead in a background thread (decoding overlaps the work on earlier frames). When
+    the consumer stops, the thread stops too (`PREFETCH_STOP_SECONDS` at most), its source closed: a thread still
+    decoding as the process exits can crash it."""
     items: queue.Queue = queue.Queue(maxsize=depth)
     done, stop = object(), threading.Event()
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                items.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
 
     def work():
         try:
             for item in frames:
-                while not stop.is_set():
-                    try:
-                        items.put(item, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not put(item):
                     return
-            items.put(done)
+            put(done)
         except BaseException as err:  # handed to the consumer
-            items.put(err)
+            put(err)
+        finally:
+            if hasattr(frames, "close"):
+                frames.close()
 
-    thread = threading.Thread(target=work, daemon=True)
+    thread = threading.Thread(target=work, name="jaxmocap-decode", daemon=True)
     thread.start()
     try:
         while (item := items.get()) is not done:
@@ -109,6 +120,7 @@ def _prefetch(frames: Iterator, depth: int = 8) -> Iterator:
             yield item
     finally:
         stop.set()
+        thread.join(PREFETCH_STOP_SECONDS)
 
 
 def open_media(source, start: int = 0, end: int | None = None, stride: int = 1) -> tuple[Media, Iterator]:

@@ -32,6 +32,19 @@ def handling(handler, *signums: signal.Signals):
                 signal.signal(s, old)
 
 
+def interrupt_of(err: BaseException) -> int | None:
+    """The signal an exception stands for: SIGTERM for `Terminated`, SIGINT for another KeyboardInterrupt, also
+    where one caused the exception or was being handled as it was raised (Ctrl-C in a C extension's import comes
+    out as an ImportError from it); None for others."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return signal.SIGTERM if isinstance(err, Terminated) else signal.SIGINT
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return None
+
+
 RESIGNAL_SECONDS = 0.01  # after a dropped interrupt, when it is signalled again
 
 

@@ -10,14 +10,18 @@ _xla_gc_callback ...> KeyboardInterrupt").
 import _thread
 import gc
 import signal
+import subprocess
 import sys
+import threading
 import time
 
 import pytest
 
+from conftest import CLIP
 from jaxmocap.batch import task
+from jaxmocap.frame_source import open_media
 from jaxmocap.pipeline import RunConfig
-from jaxmocap.signals import Terminated, cancellable, handling, interrupts_kept
+from jaxmocap.signals import Terminated, cancellable, handling, interrupt_of, interrupts_kept
 
 
 def collect_interrupted(signum: int) -> None:
@@ -106,3 +110,65 @@ def test_cancellable_work_stops_on_ctrl_c_where_sigint_was_inherited_ignored():
     with handling(signal.SIG_IGN, signal.SIGINT), cancellable(), pytest.raises(KeyboardInterrupt):
         _thread.interrupt_main()
         go_on()
+
+
+def test_the_signal_an_exception_stands_for():
+    def raised(cause: BaseException, wrapped: bool):
+        try:
+            try:
+                raise cause
+            except BaseException as err:
+                if wrapped:
+                    raise ImportError("initialization failed") from err
+                raise ValueError("while stopping")  # noqa: B904 (the interrupt, its context)
+        except BaseException as err:
+            return err
+
+    assert interrupt_of(KeyboardInterrupt()) == signal.SIGINT and interrupt_of(Terminated()) == signal.SIGTERM
+    assert interrupt_of(raised(KeyboardInterrupt(), True)) == signal.SIGINT  # a C extension's import, cut short
+    assert interrupt_of(raised(Terminated(), False)) == signal.SIGTERM  # an error raised while stopping
+    assert interrupt_of(raised(OSError(), True)) is None and interrupt_of(ValueError()) is None
+
+
+# The command's process, an interrupt given at one moment of it: ``{moment}`` is Python code run there.
+COMMAND_AT = """
+import atexit, importlib.abc, os, signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)
+class Moment(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name == "jaxmocap.cli":
+            sys.meta_path.remove(self)
+            {moment}
+sys.meta_path.insert(0, Moment())
+from jaxmocap.command import main
+sys.exit(main(["model", "--help"]))
+"""
+MOMENTS = {
+    "in an import": "os.kill(os.getpid(), signal.SIGINT); time.sleep(1)",
+    "in a C extension's import": "raise ImportError('initialization failed') from KeyboardInterrupt()",
+    "a SIGTERM in an import": "os.kill(os.getpid(), signal.SIGTERM); time.sleep(1)",
+    "as the process exits": "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(1)))",
+}
+
+
+@pytest.mark.parametrize("moment", MOMENTS)
+def test_an_interrupt_at_any_moment_of_the_command_ends_it_with_one_line(moment):
+    """Ctrl-C or SIGTERM while the command starts: 130 or 143 and one line; once it has ended (Python's exit
+    callbacks, its threads joined), nothing: the command's own exit code, no traceback."""
+    out = subprocess.run([sys.executable, "-c", COMMAND_AT.format(moment=MOMENTS[moment])], capture_output=True,
+                         text=True, timeout=120)
+    if moment == "as the process exits":
+        assert out.returncode == 0 and "usage: jaxmocap model" in out.stdout and out.stderr == "", out.stderr
+    else:
+        sigterm = "SIGTERM" in moment
+        assert out.returncode == (143 if sigterm else 130), out.stderr
+        assert out.stderr == f"jaxmocap: {'terminated' if sigterm else 'interrupted'}\n", out.stderr
+
+
+def test_a_video_left_unread_stops_its_decoding_thread():
+    """The frames decoded ahead in a thread: when the reader stops early, so does the thread (a thread still
+    decoding as the process exits can crash it), its capture released."""
+    _, frames = open_media(CLIP)
+    next(frames)
+    frames.close()
+    assert not [t for t in threading.enumerate() if t.name == "jaxmocap-decode"]
