@@ -48,6 +48,7 @@ DATA = ROOT / "tests" / "data"
 VIEWS = {"cam01": ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4",
          "cam03": DATA / "pose2sim_single_cam03.mp4"}
 REFERENCE = DATA / "pose2sim_single_reference_3d.npz"
+CALIBRATION = DATA / "pose2sim_Calib.qca.txt"
 # SMPL-X joints in the reference's order: L/R shoulder, elbow, wrist, hip, knee, ankle
 SMPLX_LIMB_JOINTS = (16, 17, 18, 19, 20, 21, 1, 2, 4, 5, 7, 8)
 BLAZEPOSE_LIMB_LANDMARKS = (11, 12, 13, 14, 15, 16, 23, 24, 25, 26, 27, 28)
@@ -192,6 +193,42 @@ def variant_reference(reference: np.ndarray, kind: str) -> np.ndarray:
     return reference[::2] if kind == "30fps" else reference
 
 
+def room_up(view: str, path=CALIBRATION) -> np.ndarray:
+    """The room's up direction seen from the camera of ``view`` (x right, y down, z forward), from the
+    calibration (tests/data/SOURCES.md)."""
+    import xml.etree.ElementTree as ElementTree
+
+    camera = next(c for c in ElementTree.parse(path).getroot().iter("camera") if c.get("serial") == view)
+    rows = camera.find("transform").attrib
+    world_to_camera = np.diag([1.0, -1.0, -1.0]) @ np.array([[float(rows[f"r{i}{j}"]) for j in "123"] for i in "123"])
+    return world_to_camera[:, 2]
+
+
+def variant_up(up: np.ndarray, kind: str | None) -> np.ndarray | None:
+    """The room's up seen by a variant's camera: mirrored (x negated) or turned about the optical axis as its
+    frames were (``rotate90``: clockwise; ``roll``: OpenCV's counter-clockwise degrees); None for ``pan`` (a
+    moving camera has no one floor yet)."""
+    if kind == "pan":
+        return None
+    if kind == "mirror":
+        return up * np.array([-1.0, 1.0, 1.0])
+    angle = -np.pi / 2 if kind == "rotate90" else np.radians(float(kind[4:])) if kind and kind.startswith("roll") \
+        else 0.0
+    cos, sin = np.cos(angle), np.sin(angle)
+    return np.array([cos * up[0] + sin * up[1], -sin * up[0] + cos * up[1], up[2]])
+
+
+def floor_scores(motion: dict, up: np.ndarray | None) -> dict:
+    """The motion's floor against the room's ``up``: the angle between their up directions (degrees; None
+    without a floor or a known up) and the share of heel and toe frames in contact."""
+    if "floor" not in motion or up is None:
+        return dict(floor_angle_deg=None, contact_share=None)
+    normal = np.asarray(motion["floor"][:3], np.float64)
+    cos = normal @ up / np.linalg.norm(normal) / np.linalg.norm(up)
+    return dict(floor_angle_deg=float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))),
+                contact_share=float(np.mean(motion["contact"][np.asarray(motion["valid"])])))
+
+
 def fingers_bent_backwards(motion: dict, tolerance_deg: float = 10.0) -> float:
     """The share of finger joint-frames (index to ring, both hands, valid frames) bent backwards, against their
     flexion, by more than ``tolerance_deg``."""
@@ -261,7 +298,7 @@ def limb_joints(motion: dict) -> np.ndarray:
     return np.where(np.asarray(motion["valid"])[:, None, None], joints, np.nan)
 
 
-def report_view(name: str, stages: Stages, reference: np.ndarray) -> dict:
+def report_view(name: str, stages: Stages, reference: np.ndarray, up: np.ndarray | None = None) -> dict:
     rows = {"identities": stages.identities}
     for stage, joints in (("blazepose", stages.blazepose), ("ik", limb_joints(stages.ik)),
                           ("motion", limb_joints(stages.motion))):
@@ -273,7 +310,7 @@ def report_view(name: str, stages: Stages, reference: np.ndarray) -> dict:
             rows[stage] |= rotation_coherence(motion) | dict(fingers_backwards=fingers_bent_backwards(motion))
             if stage != "ik":
                 errors = np.asarray(motion["reprojection_error_px"])[np.asarray(motion["valid"])]
-                rows[stage] |= dict(valid_share=float(np.mean(motion["valid"])),
+                rows[stage] |= floor_scores(motion, up) | dict(valid_share=float(np.mean(motion["valid"])),
                                     reprojection_median_px=float(np.median(errors)),
                                     reprojection_over_40px=float(np.mean(np.asarray(motion["reprojection_error_px"])
                                                                          > 40)))
@@ -375,7 +412,8 @@ def main():
                     source = video if kind is None else write_variant(video, kind, work / "variant.mp4",
                                                                       person_x[view])
                     stages = run_stages(source, work / "run", landmarks=model, chunk_size=args.chunk)
-                results[model][name] = report_view(name, stages, variant_reference(reference, kind)) | {
+                results[model][name] = report_view(name, stages, variant_reference(reference, kind),
+                                                   variant_up(room_up(view), kind)) | {
                     "seconds": time.perf_counter() - begin}
                 print(f"{name} [{model}]: {time.perf_counter() - begin:.0f} s", flush=True)
                 if kind is None and model == args.landmarks[0]:
@@ -386,7 +424,7 @@ def main():
     print(f"\naccuracy on real footage (Pose2Sim single-person take), {platform.machine()}")
     print(f"{'view':>14} {'model':>6} {'stage':>10} {'frames':>6} {'PA-MPJPE mm':>11} {'WA-MPJPE':>8} {'flex MAE':>9} "
           f"{'accel':>7} {'2D med px':>9} {'>40px':>6} {'valid':>6} {'rot med':>8} {'>45deg':>7} "
-          f"{'fingers back':>12} {'turns>45':>8} {'ids':>3}")
+          f"{'fingers back':>12} {'turns>45':>8} {'ids':>3} {'floor':>6} {'contact':>7}")
     for model, cases in results.items():
         for name, rows in cases.items():
             for stage in ("blazepose", "ik", "motion"):
@@ -397,7 +435,9 @@ def main():
                              f"{100 * r['rotation_change_over_45deg']:>6.1f}% {100 * r['fingers_backwards']:>11.1f}% "
                              f"{100 * r['global_turn_over_45deg']:>7.1f}%" if "rotation_change_median_deg" in r else "")
                 if stage == "motion":
-                    coherence += f" {rows['identities']:>3}"
+                    floor = "-" if r["floor_angle_deg"] is None else f"{r['floor_angle_deg']:.1f}°"
+                    contact = "-" if r["contact_share"] is None else f"{100 * r['contact_share']:.0f}%"
+                    coherence += f" {rows['identities']:>3} {floor:>6} {contact:>7}"
                 print(f"{name:>14} {model:>6} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
                       f"{r['wa_mpjpe_mm']:>8.0f} {r['flexion_mae_deg']:>8.1f}° {r['accel_error_mm']:>7.1f} {extra} "
                       f"{coherence}")

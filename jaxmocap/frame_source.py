@@ -123,6 +123,21 @@ def _prefetch(frames: Iterator, depth: int = 8) -> Iterator:
         thread.join(PREFETCH_STOP_SECONDS)
 
 
+def sample_frames(path, indices: list[int]) -> list[np.ndarray]:
+    """The video's frames ``indices`` (BGR), each found by seeking; those it cannot give are left out."""
+    cap = capture(path)
+    try:
+        frames = []
+        for index in indices:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+            ok, frame = cap.read()
+            if ok and frame is not None:
+                frames.append(frame)
+        return frames
+    finally:
+        cap.release()
+
+
 def open_media(source, start: int = 0, end: int | None = None, stride: int = 1) -> tuple[Media, Iterator]:
     """The input's description and an iterator of ``(frame index, BGR frame)`` over frames
     ``start, start + stride, ... < end``. Video frames are decoded ahead in a background thread."""

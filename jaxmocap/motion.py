@@ -27,6 +27,9 @@ MOTION_SHAPES = {
     "keypoints_2d": (67, 3), "reprojection_error_px": (), "fps": None, "image_size": None, "model_sha256": None,
 }
 PINHOLE_SHAPES = {"focal_length": (), "principal_point": (2,)}  # both or neither
+# the world frame (`jaxmocap.integrate.ground`): all or none; key -> shape after the frame axis, or None: no frame axis
+WORLD_SHAPES = {"world_global_orient": (3,), "world_transl": (3,), "camera_from_world": (4, 4), "contact": (4,),
+                "floor": None}
 
 
 def lens(motion: dict) -> tuple[float | None, np.ndarray | None]:
@@ -56,12 +59,19 @@ def _check(motion: dict, where: str) -> None:
             raise InputError(f"{where}: key {key!r} has shape {np.shape(motion[key])}, expected {PINHOLE_SHAPES[key]}")
     if present and not float(motion["focal_length"]) > 0:
         raise InputError(f"{where}: focal_length must be positive, got {float(motion['focal_length'])}")
+    world = [k for k in WORLD_SHAPES if k in motion]
+    if world and len(world) != len(WORLD_SHAPES):
+        raise InputError(f"{where}: {world[0]!r} without {sorted({*WORLD_SHAPES} - {*world})[0]!r}")
+    for key in world:
+        expected = (4,) if WORLD_SHAPES[key] is None else (frames, *WORLD_SHAPES[key])
+        if np.shape(motion[key]) != expected:
+            raise InputError(f"{where}: key {key!r} has shape {np.shape(motion[key])}, expected {expected}")
 
 
 def write_motion(path, motion: dict) -> Path:
     """Check the arrays and write them atomically as ``.npz`` (float32 parameters)."""
     _check(motion, str(path))
-    return write_result_npz(path, motion, ("valid",))
+    return write_result_npz(path, motion, ("valid", "contact"))
 
 
 def read_motion(path) -> dict[str, np.ndarray]:

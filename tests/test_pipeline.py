@@ -34,7 +34,7 @@ from jaxmocap.cli import main
 from jaxmocap.errors import InputError
 from jaxmocap.integrate import inverse_kinematics
 from jaxmocap.io import file_sha256
-from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
+from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, WORLD_SHAPES, read_motion
 from jaxmocap.pipeline import Observations, RunConfig, whole_clip
 from jaxmocap.pipeline.observe import fill_hand_gaps
 from smplx_jax import constants
@@ -59,12 +59,18 @@ def result(tmp_path_factory):
 def test_motion_schema_and_conventions(result):
     out, report = result
     motion = read_motion(out / "motion.npz")
-    assert report.frames == FRAMES and set(motion) == set(MOTION_SHAPES) | set(PINHOLE_SHAPES) | {"landmark_model"}
+    assert report.frames == FRAMES and set(motion) == set(MOTION_SHAPES) | set(PINHOLE_SHAPES) | set(WORLD_SHAPES) | {
+        "landmark_model"}
     assert str(motion["landmark_model"]) == report.landmarks == "heavy"  # the offline default
     assert motion["valid"].all() and motion["body_pose"].shape == (FRAMES, 21, 3)
     assert tuple(motion["image_size"]) == (1080, 1920) and float(motion["fps"]) == pytest.approx(60.0)
     assert str(motion["model_sha256"]) == file_sha256(smplx_jax.default_model_path())
     assert np.all(motion["reprojection_error_px"] < 25.0)
+    # the room's up seen from this camera (its calibration, bench/accuracy.py's `room_up`); ours through the default
+    # lens, whose focal length is 15% off this camera's: some 3 degrees
+    room_up = np.array([0.214, -0.899, -0.383])
+    assert np.degrees(np.arccos(motion["floor"][:3] @ room_up)) < 4.0
+    assert motion["contact"].dtype == bool and np.ptp(motion["camera_from_world"], axis=0).max() == 0.0
     names = sorted(p.name for p in (out / "keypoints").iterdir())
     assert names[0] == "pose2sim_single_cam01_000000000020_keypoints.json" and len(names) == FRAMES
     assert not (out / ".jaxmocap_chunks").exists()
@@ -283,7 +289,8 @@ def test_the_motion_does_not_depend_on_the_chunks(result, tmp_path):
     out, _ = result
     report = run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=1, overlay=False, progress=False)
     single, chunked = read_motion(report.motion), read_motion(out / "motion.npz")
-    for key in ("global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "betas", "transl"):
+    for key in ("global_orient", "body_pose", "left_hand_pose", "right_hand_pose", "betas", "transl",
+                "world_global_orient", "world_transl", "contact"):
         np.testing.assert_array_equal(single[key], chunked[key], err_msg=key)
 
 

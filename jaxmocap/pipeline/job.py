@@ -12,6 +12,7 @@ in windows placed by frame number), the whole clip as one fit -> ``motion.npz`` 
 """
 
 import dataclasses
+import functools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,9 @@ from jaxmocap.detect import Detector
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import available_landmarks
-from jaxmocap.frame_source import Media, open_media
+from jaxmocap.detect.verticals import vertical_direction
+from jaxmocap.frame_source import Media, open_media, sample_frames
+from jaxmocap.integrate.ground import world_arrays
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
@@ -116,6 +119,10 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
                    for i, t in tracks.items()}
         main = main_person(motions)
+        if video and inputs.lens[0] is not None:  # a static camera's world frame, every person on one floor
+            world = world_arrays(inputs.model, {i: (t.bodies.params, t.bodies.valid) for i, t in tracks.items()},
+                                 main, inputs.media.fps, functools.partial(_scene_up, config, inputs, chunks))
+            motions = {i: m | world.get(i, {}) for i, m in motions.items()}
         frames = sum(len(c.frame_index) for c in chunks)
         motion = motions[main] if motions else motion_arrays(
             inputs.model, Bodies.absent(frames, inputs.model), np.zeros((frames, 67, 3)), inputs.lens) | meta
@@ -125,6 +132,19 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     store.clear()
     return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions),
                      inputs.landmarks)
+
+
+SCENE_FRAMES = 5  # frames of a video whose straight edges show the scene's vertical (a static camera's: the same)
+
+
+def _scene_up(config: RunConfig, inputs: Inputs, chunks: list[Chunk], near: np.ndarray) -> np.ndarray | None:
+    """The scene's vertical near ``near`` (`verticals.vertical_direction`) from `SCENE_FRAMES` frames spread over
+    those the run read; None for a webcam (its frames are gone)."""
+    if inputs.media.kind != "video":
+        return None
+    read = np.concatenate([c.frame_index for c in chunks])
+    images = sample_frames(config.source, read[np.linspace(0, len(read) - 1, SCENE_FRAMES).astype(int)].tolist())
+    return vertical_direction(images, inputs.lens[0], inputs.lens[1], near)
 
 
 def _clip_fitted(config: RunConfig, inputs: Inputs) -> bool:

@@ -1,0 +1,195 @@
+"""The floor under a clip and the world frame standing on it (DESIGN 2.3, "World frame"), for a static camera.
+
+The floor's normal is the scene's vertical where its upright edges show it (`jaxmocap.detect.verticals`: a fraction
+of a degree through the right lens). Without them it is fitted to the feet: a foot carrying weight is at rest, on
+the floor, so the floor is the plane of the soles under the heels and toes while they rest (`floor_plane`; each
+joint stands its own height above its sole, `sole_heights`), its normal drawn towards the torsos' mean up direction
+(people stand and walk upright), which decides it where the resting feet span too little of the floor to tilt a
+plane; a monocular fit's feet tilt it by tens of degrees where a person stays in one place. The floor's height is
+the resting soles' either way. The world frame (`world_frame`): y up along the floor's normal, the floor (the
+soles' plane) y = 0, z the camera's forward direction along the floor, the origin on the floor under the main
+person's pelvis in their first valid frame. `world_arrays` gives motion.npz's world keys of a motion in the
+camera's frame.
+"""
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import jax
+import numpy as np
+from jaxtyping import Bool, Float
+
+import smplx_jax
+from jaxmocap.batching import map_in_buckets
+from jaxmocap.integrate import fitting
+
+FOOT_JOINTS = (62, 60, 65, 63)  # left heel, left big toe, right heel, right big toe (SMPL-X's vertex joints)
+PELVIS, NECK = 0, 12
+# A stepping foot moves at 1-4 m/s and one carrying weight not at all: below this speed a heel or toe may carry
+# weight. Its speed is its displacement over `SPEED_WINDOW_S`, long enough to average out a fit's frame-to-frame
+# noise (some millimetres) and short enough to see a step (0.3-0.6 s a stance).
+REST_SPEED_M_S = 0.25
+SPEED_WINDOW_S = 0.2
+CONTACT_HEIGHT_M = 0.05  # a resting sole this close to the floor (or below it) touches it: a monocular fit's depth
+# noise, some centimetres, moves a sole that far
+MIN_HEIGHT_NOISE_M = 0.01  # resting soles stray at least this far from one plane (a foot flexes, a floor is uneven)
+UP_LEAN_RAD = math.radians(15.0)  # how far the torsos' mean direction over a clip leans from the vertical
+PLANE_ITERATIONS = 5  # refits with the points found touching the floor (it settles in two or three)
+
+
+class Floor(NamedTuple):
+    """The plane ``normal · X + offset = 0`` in the camera's frame (metres), ``normal`` the unit up direction."""
+
+    normal: Float[np.ndarray, "3"]
+    offset: float
+
+    def heights(self, points: Float[np.ndarray, "*n 3"]) -> Float[np.ndarray, "*n"]:
+        return np.asarray(points @ self.normal + self.offset)
+
+    @property
+    def array(self) -> Float[np.ndarray, "4"]:
+        """motion.npz's ``floor (4,)``: ``(nx, ny, nz, d)``."""
+        return np.append(self.normal, self.offset)
+
+
+_JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
+
+
+def camera_joints(model: smplx_jax.BodyModel, params: smplx_jax.SMPLXParams) -> Float[np.ndarray, "T 127 3"]:
+    """The 127 joints of each frame's body in the camera's frame (``transl`` included)."""
+    params = jax.tree.map(lambda a: np.asarray(a, np.float32), params)
+    return map_in_buckets(lambda chunk, _: np.asarray(_JOINTS(model, chunk)), params, fitting.BUCKETS)
+
+
+def sole_heights(model: smplx_jax.BodyModel, betas: Float[np.ndarray, "B"]) -> Float[np.ndarray, "4"]:
+    """How far each heel and toe joint (`FOOT_JOINTS`) stands above the soles in the rest pose (feet flat), for
+    the shape ``betas``."""
+    rest = smplx_jax.SMPLXParams.zeros(model.num_betas, model.num_expression)
+    out = smplx_jax.forward(model, dataclasses.replace(rest, betas=np.asarray(betas, np.float32)))
+    return np.asarray(out.joints)[FOOT_JOINTS, 1] - float(np.asarray(out.vertices)[:, 1].min())
+
+
+def at_rest(feet: Float[np.ndarray, "T 4 3"], valid: Bool[np.ndarray, "T"], fps: float) -> Bool[np.ndarray, "T 4"]:
+    """Which heels and toes move slower than `REST_SPEED_M_S` (over `SPEED_WINDOW_S` about each frame, valid frames
+    only; frames without a valid one that far on either side are not at rest)."""
+    half = max(1, round(SPEED_WINDOW_S * fps / 2))
+    t = np.arange(len(valid))
+    before, after = np.clip(t - half, 0, len(t) - 1), np.clip(t + half, 0, len(t) - 1)
+    seen = valid & valid[before] & valid[after] & (after > before)
+    speed = np.linalg.norm(feet[after] - feet[before], axis=-1) * fps / np.maximum(after - before, 1)[:, None]
+    return seen[:, None] & (speed < REST_SPEED_M_S)
+
+
+def torso_up(joints: Float[np.ndarray, "T 127 3"], valid: Bool[np.ndarray, "T"]) -> Float[np.ndarray, "3"]:
+    """The mean direction from pelvis to neck over the valid frames (unit)."""
+    spine = joints[valid, NECK] - joints[valid, PELVIS]
+    mean = (spine / np.linalg.norm(spine, axis=-1, keepdims=True)).sum(0)
+    return mean / np.linalg.norm(mean)
+
+
+def stance_weights(resting: Bool[np.ndarray, "T K"]) -> Float[np.ndarray, "T K"]:
+    """Each resting frame's share of its stance (1 / the frames of its run of rest), 0 elsewhere: a heel or toe
+    resting for many frames is one observation of the floor (its fitted position's errors hold from frame to frame),
+    not many."""
+    weights = np.zeros(resting.shape)
+    for k in range(resting.shape[1]):
+        edges = np.diff(np.r_[0, resting[:, k].astype(int), 0])
+        for start, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            weights[start:stop, k] = 1.0 / (stop - start)
+    return weights
+
+
+def floor_plane(feet: Float[np.ndarray, "N 3"], above_sole: Float[np.ndarray, "N"], weights: Float[np.ndarray, "N"],
+                up: Float[np.ndarray, "3"], known_up: bool = False) -> Floor:
+    """The floor under the resting heels and toes (camera frame; each ``above_sole`` metres above its sole, each
+    weighed by ``weights``: 0 where not resting, `stance_weights`), its normal pointing ``up``'s way: the soles'
+    heights weighed against their spread about the plane (at least `MIN_HEIGHT_NOISE_M`), the normal's lean from
+    ``up`` against `UP_LEAN_RAD` (a Gaussian maximum a posteriori plane); refitted with the soles within
+    `CONTACT_HEIGHT_M` of it. ``known_up``: the normal is ``up`` (the scene's vertical), only the height fitted.
+    Without resting points: the plane normal to ``up`` under the lowest tenth of them."""
+    up = np.asarray(up, np.float64) / np.linalg.norm(up)
+    feet, above_sole = np.asarray(feet, np.float64), np.asarray(above_sole, np.float64)
+    resting = np.asarray(weights) > 0
+    if not resting.any():
+        return Floor(up, -float(np.quantile(feet @ up - above_sole, 0.1))) if len(feet) else Floor(up, 0.0)
+    prior = (np.eye(3) - np.outer(up, up)) / UP_LEAN_RAD**2
+    floor = Floor(up, -float(np.median(feet[resting] @ up - above_sole[resting])))
+    for _ in range(PLANE_ITERATIONS):
+        soles = feet - above_sole[:, None] * floor.normal  # (a resting foot is flat: its sole straight below)
+        touching = resting & (np.abs(floor.heights(soles)) < CONTACT_HEIGHT_M)
+        w = np.where(touching if touching.sum() >= 3 else resting, weights, 0.0)
+        centre = w @ soles / w.sum()
+        noise = max(MIN_HEIGHT_NOISE_M, float(np.sqrt(w @ floor.heights(soles) ** 2 / w.sum())))
+        spread = (w[:, None] * (soles - centre)).T @ (soles - centre) / noise**2
+        normal = up if known_up else np.linalg.eigh(spread + prior)[1][:, 0]  # the smallest eigenvalue's
+        normal = normal if normal @ up > 0 else -normal
+        floor = Floor(normal, -float(normal @ centre))
+    return floor
+
+
+def world_frame(floor: Floor, origin: Float[np.ndarray, "3"]) -> Float[np.ndarray, "4 4"]:
+    """``camera_from_world``: y up along the floor's normal, z the camera's forward direction along the floor (its
+    x where it looks straight down), x = y × z; the origin the floor's point under ``origin`` (camera frame)."""
+    y = floor.normal
+    forward = np.array([0.0, 0.0, 1.0]) - y[2] * y
+    if np.linalg.norm(forward) < 1e-3:  # looking straight down: z along the camera's x
+        forward = np.array([1.0, 0.0, 0.0]) - y[0] * y
+    z = forward / np.linalg.norm(forward)
+    x = np.cross(y, z)
+    transform = np.eye(4)
+    transform[:3, :3] = np.stack([x, y, z], axis=1)
+    transform[:3, 3] = origin - floor.heights(origin) * y
+    return transform
+
+
+def contacts(feet: Float[np.ndarray, "T 4 3"], above_sole: Float[np.ndarray, "4"], resting: Bool[np.ndarray, "T 4"],
+             floor: Floor) -> Bool[np.ndarray, "T 4"]:
+    """motion.npz's ``contact``: a heel or toe at rest whose sole is within `CONTACT_HEIGHT_M` of the floor, or
+    below it."""
+    return resting & (floor.heights(feet) - above_sole < CONTACT_HEIGHT_M)
+
+
+def world_pose(global_orient: Float[np.ndarray, "T 3"], transl: Float[np.ndarray, "T 3"],
+               pelvis: Float[np.ndarray, "T 3"], camera_from_world: Float[np.ndarray, "4 4"]):
+    """``(world_global_orient, world_transl)``: the body in the world frame. The root turns about the rest
+    pelvis ``J0 = pelvis - transl`` (its camera-frame position less ``transl``), so ``world_transl`` is
+    ``R^T (pelvis - t) - J0``."""
+    rotation, t = camera_from_world[:3, :3], camera_from_world[:3, 3]
+    root = np.asarray(smplx_jax.rotations.rotvec_to_rotmat(np.asarray(global_orient, np.float64)))
+    world_orient = np.asarray(smplx_jax.rotations.rotmat_to_rotvec(rotation.T @ root))
+    return world_orient, (pelvis - t) @ rotation - (pelvis - transl)
+
+
+def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]],
+                 main: int, fps: float, scene_up=None) -> dict[int, dict[str, np.ndarray]]:
+    """Each person's motion.npz world keys (``world_global_orient``, ``world_transl``, ``camera_from_world``,
+    ``floor``, ``contact``) from their bodies in the camera's frame and where they are valid (``people``: by
+    identity), all on one floor, the origin under ``main``; {} without a valid frame. ``scene_up(near)``: the
+    scene's vertical near the torsos' up (`jaxmocap.detect.verticals`), or None: where it gives one, it is the
+    floor's normal (its edges hold it to a fraction of a degree; a monocular fit's resting feet, to several)."""
+    joints = {i: camera_joints(model, params) for i, (params, _) in people.items()}
+    valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
+    if not any(v.any() for v in valid.values()):
+        return {}
+    feet = {i: j[:, FOOT_JOINTS] for i, j in joints.items()}
+    resting = {i: at_rest(feet[i], valid[i], fps) for i in people}
+    seen = [i for i in people if valid[i].any()]
+    above = {i: sole_heights(model, params.betas[np.argmax(valid[i])]) for i, (params, _) in people.items()
+             if i in seen}
+    up = torso_up(np.concatenate([joints[i] for i in seen]), np.concatenate([valid[i] for i in seen]))
+    vertical = None if scene_up is None else scene_up(up)
+    floor = floor_plane(np.concatenate([feet[i][valid[i]].reshape(-1, 3) for i in seen]),
+                        np.concatenate([np.tile(above[i], int(valid[i].sum())) for i in seen]),
+                        np.concatenate([stance_weights(resting[i])[valid[i]].ravel() for i in seen]),
+                        up if vertical is None else vertical, known_up=vertical is not None)
+    first = main if valid[main].any() else seen[0]
+    camera_from_world = world_frame(floor, joints[first][np.argmax(valid[first]), PELVIS])
+    out = {}
+    for i, (params, _) in people.items():
+        orient, transl = world_pose(params.global_orient, params.transl, joints[i][:, PELVIS], camera_from_world)
+        out[i] = {"world_global_orient": orient.astype(np.float32), "world_transl": transl.astype(np.float32),
+                  "camera_from_world": np.repeat(camera_from_world[None], len(valid[i]), 0).astype(np.float32),
+                  "floor": floor.array.astype(np.float32),
+                  "contact": contacts(feet[i], above.get(i, np.zeros(4)), resting[i], floor)}
+    return out
