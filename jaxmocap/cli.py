@@ -153,7 +153,8 @@ def _cmd_fit(args):
 def _cmd_export(args):
     from jaxmocap.export import export_motion
 
-    path = export_motion(args.motion, args.format, args.out, model_path=args.model, focal_px=args.focal)
+    path = export_motion(args.motion, args.format, args.out, model_path=args.model, focal_px=args.focal,
+                         frame=args.frame)
     print(f"wrote {path}")
 
 
@@ -316,6 +317,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True, help="file to write (.bvh; .glb binary or .gltf JSON)")
     p.add_argument("--model", type=Path, default=None, help="the body model the motion was made with (default model)")
     p.add_argument("--focal", type=float, default=None, help="focal length in pixels (default: image diagonal)")
+    p.add_argument("--frame", choices=("world", "camera"), default="world",
+                   help="world: on the floor (y up, the floor y = 0) where the motion has a world frame; camera: "
+                        "the camera's frame turned y up (default: %(default)s)")
     p.set_defaults(run=_cmd_export)
 
     p = command("model", help="write the license-free default body model as an SMPL-X .npz")

@@ -32,6 +32,7 @@ from conftest import (
 )
 from jaxmocap.cli import main
 from jaxmocap.errors import InputError
+from jaxmocap.export import animation, global_transforms
 from jaxmocap.integrate import inverse_kinematics
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, WORLD_SHAPES, read_motion
@@ -66,10 +67,9 @@ def test_motion_schema_and_conventions(result):
     assert tuple(motion["image_size"]) == (1080, 1920) and float(motion["fps"]) == pytest.approx(60.0)
     assert str(motion["model_sha256"]) == file_sha256(smplx_jax.default_model_path())
     assert np.all(motion["reprojection_error_px"] < 25.0)
-    # the room's up seen from this camera (its calibration, bench/accuracy.py's `room_up`); ours through the default
-    # lens, whose focal length is 15% off this camera's: some 3 degrees
-    room_up = np.array([0.214, -0.899, -0.383])
-    assert np.degrees(np.arccos(motion["floor"][:3] @ room_up)) < 4.0
+    # the room's up seen from this camera (its calibration); ours through the default lens, whose focal length is
+    # 15% off this camera's: some 3 degrees
+    assert np.degrees(np.arccos(motion["floor"][:3] @ accuracy.room_up("cam01"))) < 4.0
     assert motion["contact"].dtype == bool and np.ptp(motion["camera_from_world"], axis=0).max() == 0.0
     names = sorted(p.name for p in (out / "keypoints").iterdir())
     assert names[0] == "pose2sim_single_cam01_000000000020_keypoints.json" and len(names) == FRAMES
@@ -237,6 +237,9 @@ def test_overlay_and_exports(result):
     doc = json.loads(data[20:20 + struct.unpack_from("<I", data, 12)[0]])
     times = doc["accessors"][doc["animations"][0]["samplers"][0]["input"]]
     assert times["count"] == FRAMES and times["max"][0] == pytest.approx((FRAMES - 1) / 60.0)
+    _, joints = global_transforms(animation(smplx_jax.load_model(smplx_jax.default_model_path()),
+                                            read_motion(out / "motion.npz")))
+    assert -0.05 < joints[0, [10, 11], 1].min() < 0.1  # exported in the world frame: the feet on the floor, y = 0
 
 
 def _no_hand_model(monkeypatch):

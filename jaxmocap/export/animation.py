@@ -1,10 +1,11 @@
 """A motion (``motion.npz`` arrays) as a skeletal animation in a y-up world frame, shared by the exporters.
 
-The motion's global orientation is in the image's camera frame (x right, y down, z away from the camera); the
-world frame here is that camera's frame turned by pi about x (x right, y up, z towards the camera), the frame
-glTF and Blender's importers expect. A motion fitted through a pinhole camera places the body by ``transl``; a
-weak-perspective one at depth ``focal / camera_scale`` for an assumed focal length in pixels (default: the image
-diagonal, a ~53 degree field of view).
+``frame="world"`` (the default, where the motion has one: its world keys, docs/formats.md): the motion's own world
+frame, y up, the floor y = 0, the body where it stood and walked. Else (``frame="camera"``, or a motion without
+world keys) the image's camera frame (x right, y down, z away from the camera) turned by pi about x (x right, y up,
+z towards the camera), the frame glTF and Blender's importers expect: a motion fitted through a pinhole camera
+placed by ``transl``, a weak-perspective one at depth ``focal / camera_scale`` for an assumed focal length in
+pixels (default: the image diagonal, a ~53 degree field of view).
 """
 
 from dataclasses import dataclass
@@ -18,6 +19,7 @@ from smplx_jax import constants
 from smplx_jax.rotations import rotvec_to_rotmat
 
 CAMERA_TO_WORLD = np.diag([1.0, -1.0, -1.0])
+FRAMES = ("world", "camera")
 
 # Where the bone of each joint without children ends (its BVH End Site): the mean of these of the 127 joints
 # (vertex joints and face landmarks) on the rest mesh. Feet reach the toe tips, the jaw the middle of the lower
@@ -95,8 +97,11 @@ def weak_perspective_origin(camera_scale, camera_trans, image_size, focal_px: fl
                            (focal / scale)[:, None]], axis=1)
 
 
-def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None) -> Animation:
-    """The world-frame animation of a motion; invalid frames hold the previous valid frame's pose."""
+def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None, frame: str = "world") -> Animation:
+    """The animation of a motion in its world frame or the camera's (module docstring); invalid frames hold the
+    previous valid frame's pose."""
+    if frame not in FRAMES:
+        raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
     valid = np.asarray(motion["valid"], bool)
     held = held_frames(valid)
     betas = np.asarray(motion["betas"], np.float64)[valid].mean(axis=0)
@@ -104,15 +109,18 @@ def animation(model: smplx_jax.BodyModel, motion, focal_px: float | None = None)
     rest_joints = np.asarray(model.joint_template, np.float64) + np.asarray(model.joint_shapedirs)[..., :num] @ betas
     full_pose = jax.vmap(smplx_jax.SMPLXParams.full_pose)(motion_params(motion, model.num_expression, held))
     local = np.asarray(rotvec_to_rotmat(full_pose), np.float64)
-    local[:, 0] = CAMERA_TO_WORLD @ local[:, 0]
-
-    origin = weak_perspective_origin(np.asarray(motion["camera_scale"])[held], np.asarray(motion["camera_trans"])[held],
-                                     motion["image_size"], focal_px) if lens(motion)[0] is None else 0.0
-    root_camera = origin + np.asarray(motion["transl"], np.float64)[held] + rest_joints[0]
+    if frame == "world" and "world_transl" in motion:
+        local[:, 0] = np.asarray(rotvec_to_rotmat(np.asarray(motion["world_global_orient"], np.float64)[held]))
+        root = np.asarray(motion["world_transl"], np.float64)[held] + rest_joints[0]
+    else:
+        local[:, 0] = CAMERA_TO_WORLD @ local[:, 0]
+        origin = weak_perspective_origin(np.asarray(motion["camera_scale"])[held],
+                                         np.asarray(motion["camera_trans"])[held], motion["image_size"],
+                                         focal_px) if lens(motion)[0] is None else 0.0
+        root = (origin + np.asarray(motion["transl"], np.float64)[held] + rest_joints[0]) @ CAMERA_TO_WORLD.T
     return Animation(
         names=constants.JOINT_NAMES, parents=model.parents, rest_joints=rest_joints, local_rotmats=local,
-        root_positions=root_camera @ CAMERA_TO_WORLD.T, betas=betas, fps=float(motion["fps"]),
-        end_sites=end_sites(model, betas, rest_joints))
+        root_positions=root, betas=betas, fps=float(motion["fps"]), end_sites=end_sites(model, betas, rest_joints))
 
 
 def global_transforms(anim: Animation) -> tuple[np.ndarray, np.ndarray]:

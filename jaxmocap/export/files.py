@@ -36,9 +36,11 @@ def _model_path(source, recorded: str, model_path) -> Path:
     return path
 
 
-def export_motion(motion_path, fmt: str, out, model_path=None, focal_px: float | None = None) -> Path:
+def export_motion(motion_path, fmt: str, out, model_path=None, focal_px: float | None = None,
+                  frame: str = "world") -> Path:
     """Write ``out`` in ``fmt`` (``bvh`` or ``gltf``) from a motion file, or a hands file (glTF only), and its body
-    model (default model when ``model_path`` is None; it must be the file the motion was made with)."""
+    model (default model when ``model_path`` is None; it must be the file the motion was made with); a motion in
+    its world ``frame`` where it has one, or the camera's (`animation`)."""
     if fmt not in ("bvh", "gltf"):
         raise InputError(f"unknown export format {fmt!r} (bvh or gltf)")
     if is_hands_file(motion_path):
@@ -54,5 +56,5 @@ def export_motion(motion_path, fmt: str, out, model_path=None, focal_px: float |
         raise InputError(f"{motion_path} holds no valid frame to export")
     path = _model_path(motion_path, str(motion.get("model_sha256", "")), model_path)
     model = smplx_jax.load_model(path, num_betas=motion["betas"].shape[1])
-    anim = animation(model, motion, focal_px)
+    anim = animation(model, motion, focal_px, frame)
     return write_bvh(out, anim) if fmt == "bvh" else write_gltf(out, model, anim)
