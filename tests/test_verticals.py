@@ -1,11 +1,12 @@
 """The scene's vertical from its upright edges (`jaxmocap.detect.verticals`): poles and a floor's grid drawn as a
-tilted, rolled camera sees them give the camera's up back; edges that lie flat are not taken for it."""
+tilted, rolled camera sees them give the camera's up back, and its focal length; edges that lie flat are not
+taken for the vertical."""
 
 import cv2
 import numpy as np
 import pytest
 
-from jaxmocap.detect.verticals import vertical_direction
+from jaxmocap.detect.verticals import Segments, scene_focal, vertical_direction
 from smplx_jax import rotations
 
 SIZE, FOCAL = (960, 720), 800.0
@@ -50,14 +51,25 @@ def test_upright_edges_give_the_up_direction(pitch, roll):
     up = rotation[:, 1]
     image = _drawn(rotation, np.concatenate([_poles(np.random.default_rng(0)), _grid()]))
     near = _camera(pitch + 20.0, roll - 15.0)[:, 1]  # the body's lean: 25 degrees off
-    found = vertical_direction([image], FOCAL, CENTRE, near)
+    segments = Segments.detect([image])
+    found = vertical_direction(segments, FOCAL, CENTRE, near)
     assert found is not None
     assert np.degrees(np.arccos(np.clip(found @ up, -1, 1))) < 0.5
+    # through a focal length 20% off, the vertical tilts; the scene's own (its level edges square to the upright
+    # ones) puts it back
+    guess = 0.8 * FOCAL
+    focal = scene_focal(segments, guess, CENTRE, near, max(SIZE))
+    assert focal == pytest.approx(FOCAL, rel=0.04)
+    tilted, found = (vertical_direction(segments, f, CENTRE, near) for f in (guess, focal))
+    assert np.degrees(np.arccos(np.clip(found @ up, -1, 1))) < 0.5 < np.degrees(np.arccos(np.clip(tilted @ up, -1, 1)))
 
 
 def test_edges_that_lie_flat_are_not_the_vertical():
-    """A floor's grid alone (its lines converge far from the up direction), or nothing: no vertical."""
+    """A floor's grid alone (its lines converge far from the up direction), or nothing: no vertical, no focal
+    length."""
     rotation = _camera(25.0, 12.0)
     near = rotation[:, 1]
-    assert vertical_direction([_drawn(rotation, _grid())], FOCAL, CENTRE, near) is None
-    assert vertical_direction([_drawn(rotation, np.zeros((0, 2, 3)))], FOCAL, CENTRE, near) is None
+    for segments in (_grid(), np.zeros((0, 2, 3))):
+        found = Segments.detect([_drawn(rotation, segments)])
+        assert vertical_direction(found, FOCAL, CENTRE, near) is None
+        assert scene_focal(found, FOCAL, CENTRE, near, max(SIZE)) is None
