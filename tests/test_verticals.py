@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from jaxmocap.detect.verticals import Segments, scene_focal, vertical_direction
+from jaxmocap.detect.verticals import Segments, scene_vertical, vertical_direction
 from smplx_jax import rotations
 
 SIZE, FOCAL = (960, 720), 800.0
@@ -58,10 +58,12 @@ def test_upright_edges_give_the_up_direction(pitch, roll):
     # through a focal length 20% off, the vertical tilts; the scene's own (its level edges square to the upright
     # ones) puts it back
     guess = 0.8 * FOCAL
-    focal = scene_focal(segments, guess, CENTRE, near, max(SIZE))
+    found, focal = scene_vertical(segments, guess, CENTRE, near, max(SIZE))
     assert focal == pytest.approx(FOCAL, rel=0.04)
-    tilted, found = (vertical_direction(segments, f, CENTRE, near) for f in (guess, focal))
+    tilted = vertical_direction(segments, guess, CENTRE, near)
     assert np.degrees(np.arccos(np.clip(found @ up, -1, 1))) < 0.5 < np.degrees(np.arccos(np.clip(tilted @ up, -1, 1)))
+    held, _ = scene_vertical(segments, FOCAL, CENTRE, near, max(SIZE), fixed=True)  # the focal length given
+    assert np.degrees(np.arccos(np.clip(held @ up, -1, 1))) < 0.5
 
 
 def test_edges_that_lie_flat_are_not_the_vertical():
@@ -72,4 +74,4 @@ def test_edges_that_lie_flat_are_not_the_vertical():
     for segments in (_grid(), np.zeros((0, 2, 3))):
         found = Segments.detect([_drawn(rotation, segments)])
         assert vertical_direction(found, FOCAL, CENTRE, near) is None
-        assert scene_focal(found, FOCAL, CENTRE, near, max(SIZE)) is None
+        assert scene_vertical(found, FOCAL, CENTRE, near, max(SIZE)) == (None, FOCAL)

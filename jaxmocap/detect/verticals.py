@@ -7,8 +7,8 @@ then refined by least squares over those (`vertical_direction`); None where too 
 
 The direction is as exact as the lens: a focal length 15% off tilts it by some 3 degrees in a camera looking down
 by 20 degrees. Where the scene also has level edges (a floor's, a wall's, a table's), its focal length is the one
-under which they lie square to the upright ones (`scene_focal`: the most edge length explained by a vertical and
-two level directions at right angles, over focal lengths from 0.4 to 2.5 times the image's long side).
+under which they lie square to the upright ones (`scene_vertical`: the most edge length explained by a vertical
+and two level directions at right angles, over focal lengths from 0.4 to 2.5 times the image's long side).
 """
 
 from dataclasses import dataclass
@@ -105,10 +105,14 @@ def _merged(ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def vertical_direction(segments: Segments, focal_length: float, principal_point, near: Float[np.ndarray, "3"],
                        seed: int = 0) -> np.ndarray | None:
     """The scene's up direction (unit, camera frame, within `SEARCH_RAD` of ``near`` and on its side) from the
-    upright edges among ``segments`` seen through the lens, or None where fewer than `MIN_EDGES` agree. Of the
-    `FAMILIES` directions that most edges agree on (each found without the edges of those before), the one closest
-    to ``near``: other bundles of edges (a floor's, converging in the image) can outnumber the upright ones."""
-    lens = (focal_length, principal_point)
+    upright edges among ``segments`` seen through the lens, or None where fewer than `MIN_EDGES` agree: of the
+    `FAMILIES` directions most edges agree on (`families`), the one closest to ``near``."""
+    return max(families(segments, (focal_length, principal_point), near, seed), key=lambda d: d @ near, default=None)
+
+
+def families(segments: Segments, lens, near: Float[np.ndarray, "3"], seed: int = 0) -> list[np.ndarray]:
+    """Up to `FAMILIES` directions within `SEARCH_RAD` of ``near`` that most edges agree on through ``lens``
+    (``(focal_length, principal_point)``), each found without the edges of those before."""
     near = np.asarray(near, np.float64) / np.linalg.norm(near)
     rng, found, left = np.random.default_rng(seed), [], np.ones(len(segments.lengths), bool)
     for _ in range(FAMILIES):
@@ -117,7 +121,7 @@ def vertical_direction(segments: Segments, focal_length: float, principal_point,
             break
         found.append(direction)
         left &= ~segments.agree(direction[None], *lens)[:, 0]
-    return max(found, key=lambda d: d @ near, default=None)
+    return found
 
 
 def _family(segments: Segments, left: np.ndarray, lens, near: np.ndarray, rng) -> np.ndarray | None:
@@ -132,24 +136,29 @@ def _family(segments: Segments, left: np.ndarray, lens, near: np.ndarray, rng) -
     candidates = candidates[norms > 1e-9] / norms[norms > 1e-9, None]
     candidates *= np.sign(candidates @ near)[:, None]
     candidates = candidates[candidates @ near >= np.cos(SEARCH_RAD)]
-    if not len(candidates):
+    agree = left[:, None] & segments.agree(candidates, *lens)
+    support = np.where(agree.sum(0) >= MIN_EDGES, segments.lengths @ agree, 0.0)  # (a few long edges, a frame's
+    # borders, are no vertical)
+    if not support.any():
         return None
-    support = (segments.lengths * left) @ segments.agree(candidates, *lens)
     return _refined(segments, left, lens, candidates[np.argmax(support)])
 
 
 def _refined(segments: Segments, left: np.ndarray, lens, direction: np.ndarray) -> np.ndarray | None:
-    """The direction closest to the planes of the edges ``left`` agreeing with ``direction`` (least squares, each
-    weighed by its length; `REFINEMENTS` times), or None where fewer than `MIN_EDGES` agree."""
-    normals = segments.planes(*lens)
-    for _ in range(REFINEMENTS):
+    """Of ``direction`` and its refinements (the direction closest to the planes of the edges ``left`` agreeing
+    with it: least squares, each weighed by its length; `REFINEMENTS` times), the one the longest total of edges
+    agree with; None where fewer than `MIN_EDGES` agree with it."""
+    normals, best, chosen = segments.planes(*lens), 0.0, None
+    for _ in range(REFINEMENTS + 1):
         agree = left & segments.agree(direction[None], *lens)[:, 0]
         if agree.sum() < MIN_EDGES:
-            return None
+            break
+        if segments.lengths @ agree >= best:  # (ties: the refined one)
+            best, chosen = segments.lengths @ agree, direction
         scatter = (normals[agree] * segments.lengths[agree, None]).T @ normals[agree]
         refined = np.linalg.eigh(scatter)[1][:, 0]
         direction = refined * np.sign(refined @ direction)
-    return direction
+    return chosen
 
 
 def _square_support(segments: Segments, lens, vertical: np.ndarray) -> tuple[float, int]:
@@ -166,25 +175,29 @@ def _square_support(segments: Segments, lens, vertical: np.ndarray) -> tuple[flo
     return float(segments.lengths @ (level[:, best] | agree[:, 0])), int(level[:, best].sum())
 
 
-def scene_focal(segments: Segments, focal_length: float, principal_point, near: Float[np.ndarray, "3"],
-                long_side: float) -> float | None:
-    """The focal length (pixels) under which the most edge length lies along the scene's vertical or two level
-    directions square to it and to each other (the module docstring), or None where no focal length finds
-    `MIN_EDGES` level edges. The vertical is found through ``focal_length`` (`vertical_direction`), then followed
-    from focal length to focal length outwards from it (each refined from its neighbour's)."""
-    vertical = vertical_direction(segments, focal_length, principal_point, near)
-    if vertical is None:
-        return None
-    grid = np.geomspace(*FOCAL_RANGE, FOCAL_STEPS) * long_side
+def scene_vertical(segments: Segments, focal_length: float, principal_point, near: Float[np.ndarray, "3"],
+                   long_side: float, fixed: bool = False) -> tuple[np.ndarray | None, float]:
+    """``(vertical, focal_length)``: of the directions near ``near`` that most edges agree on (`families`, through
+    ``focal_length``), the one that, with two level directions square to it and to each other, explains the most
+    edge length under the focal length that explains most (the module docstring; ``fixed``: ``focal_length``
+    only) -- a bundle of edges converging by chance has no level edges square to it. Each is followed from focal
+    length to focal length outwards from ``focal_length`` (refined from its neighbour's). Where no focal length
+    finds `MIN_EDGES` level edges: the direction closest to ``near``, through ``focal_length``; (None,
+    ``focal_length``) without any."""
+    found = families(segments, (focal_length, principal_point), near)
+    grid = np.asarray([focal_length]) if fixed else np.geomspace(*FOCAL_RANGE, FOCAL_STEPS) * long_side
     start = int(np.searchsorted(grid, focal_length))
-    every, best, focal = np.ones(len(segments.lengths), bool), 0.0, None
-    for side in (grid[start:], grid[:start][::-1]):
-        direction = vertical
-        for candidate in side:
-            direction = _refined(segments, every, (candidate, principal_point), direction)
-            if direction is None:
-                break
-            support, level = _square_support(segments, (candidate, principal_point), direction)
-            if level >= MIN_EDGES and support > best:
-                best, focal = support, float(candidate)
-    return focal
+    every, best, chosen = np.ones(len(segments.lengths), bool), 0.0, None
+    for vertical in found:
+        for side in (grid[start:], grid[:start][::-1]) if not fixed else (grid,):
+            direction = vertical
+            for candidate in side:
+                direction = _refined(segments, every, (candidate, principal_point), direction)
+                if direction is None:
+                    break
+                support, level = _square_support(segments, (candidate, principal_point), direction)
+                if level >= MIN_EDGES and support > best:
+                    best, chosen = support, (direction, float(candidate))
+    if chosen is None:
+        return max(found, key=lambda d: d @ near, default=None), focal_length
+    return chosen

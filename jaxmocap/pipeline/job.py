@@ -24,7 +24,7 @@ from jaxmocap.detect import Detector
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import available_landmarks
-from jaxmocap.detect.verticals import Segments, scene_focal, vertical_direction
+from jaxmocap.detect.verticals import Segments, scene_vertical
 from jaxmocap.frame_source import Media, open_media, sample_frames
 from jaxmocap.integrate.ground import world_arrays
 from jaxmocap.io import file_sha256
@@ -138,18 +138,16 @@ SCENE_FRAMES = 5  # frames of a video whose straight edges show the scene's vert
 
 
 def _scene_up(config: RunConfig, inputs: Inputs, chunks: list[Chunk], near: np.ndarray) -> np.ndarray | None:
-    """The scene's vertical near ``near`` (`verticals.vertical_direction`) from `SCENE_FRAMES` frames spread over
-    those the run read, through the focal length its edges show (`verticals.scene_focal`) unless the user gave
-    one; None for a webcam (its frames are gone)."""
+    """The scene's vertical near ``near`` (`verticals.scene_vertical`) from `SCENE_FRAMES` frames spread over
+    those the run read, through the focal length its edges show unless the user gave one; None for a webcam (its
+    frames are gone)."""
     if inputs.media.kind != "video":
         return None
     read = np.concatenate([c.frame_index for c in chunks])
     segments = Segments.detect(sample_frames(config.source,
                                              read[np.linspace(0, len(read) - 1, SCENE_FRAMES).astype(int)].tolist()))
-    focal, centre = inputs.lens
-    if config.focal_length is None:
-        focal = scene_focal(segments, focal, centre, near, max(inputs.media.size)) or focal
-    return vertical_direction(segments, focal, centre, near)
+    return scene_vertical(segments, *inputs.lens, near, max(inputs.media.size),
+                          fixed=config.focal_length is not None)[0]
 
 
 def _clip_fitted(config: RunConfig, inputs: Inputs) -> bool:
