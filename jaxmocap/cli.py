@@ -365,7 +365,7 @@ def main(argv=None) -> int:
     return code or 0  # `batch`: 1 when a video failed
 
 
-if __name__ == "__main__":  # python -m jaxmocap.cli: the `jaxmocap` command (`command.main`)
-    from jaxmocap.command import main as command
+if __name__ == "__main__":  # python -m jaxmocap.cli: the `jaxmocap` command (`command.entry`)
+    from jaxmocap.command import entry
 
-    sys.exit(command())
+    entry()

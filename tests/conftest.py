@@ -199,7 +199,7 @@ def cli_as_from_a_terminal(*args: str, python_options: tuple[str, ...] = ()) -> 
     (CI's, nohup's, a shell's ``cmd &``) inherits SIGINT ignored, its subprocesses too, and Python then leaves it
     ignored: the tests' SIGINT would be lost."""
     start = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-             "from jaxmocap.command import main; sys.exit(main(sys.argv[1:]))")
+             "from jaxmocap.command import entry; entry()")
     return [sys.executable, *python_options, "-c", start, *args]
 
 

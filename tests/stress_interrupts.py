@@ -27,7 +27,7 @@ ROOT = Path(__file__).parents[1]
 CLIP = ROOT / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
 # the command as from a terminal: Ctrl-C's handler Python's own (a background job inherits SIGINT ignored)
 START = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-         "from jaxmocap.command import main; sys.exit(main(sys.argv[1:]))")
+         "from jaxmocap.command import entry; entry()")
 PROBLEMS = ("Traceback", "Exception ignored", "Fatal Python error", "Aborted", "terminate called", "Segmentation")
 
 

@@ -172,3 +172,16 @@ def test_a_video_left_unread_stops_its_decoding_thread():
     next(frames)
     frames.close()
     assert not [t for t in threading.enumerate() if t.name == "jaxmocap-decode"]
+
+
+def test_the_command_ends_its_process_with_its_code_and_all_its_output(tmp_path):
+    """`command.entry` ends the process at once (no teardown) with the command's exit code, its output flushed
+    first."""
+    def entry(*args):
+        return subprocess.run([sys.executable, "-c", "from jaxmocap.command import entry; entry()", *args],
+                              capture_output=True, text=True, timeout=120)
+
+    written = entry("model", "--out", str(tmp_path / "model.npz"))
+    assert written.returncode == 0 and written.stdout == f"wrote the default body model to {tmp_path / 'model.npz'}\n"
+    missing = entry("export", str(tmp_path / "missing.npz"), "--format", "bvh", "--out", str(tmp_path / "x.bvh"))
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1 and "not found" in missing.stderr
