@@ -10,7 +10,7 @@ import pytest
 import jaxmocap.pipeline.job as pipeline_job
 from bench import accuracy
 from conftest import assert_one_body, interrupted_at_chunk
-from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, read_motion
+from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, WORLD_SHAPES, read_motion
 from jaxmocap.pipeline import RunConfig
 
 CLIP = Path(__file__).parent / "data" / "pose2sim_multi_cam01.mp4"
@@ -30,11 +30,16 @@ def test_both_people_are_tracked_and_fitted(whole_clip):
     seen = {i: m["valid"] for i, m in motions.items() if m["valid"].sum() >= 50}
     assert len(seen) == 2 and all(v.sum() >= 90 for v in seen.values())
     for m in motions.values():
-        assert set(m) == set(MOTION_SHAPES) | set(PINHOLE_SHAPES) | {"landmark_model"} and len(m["valid"]) == 100
+        assert set(m) == set(MOTION_SHAPES) | set(PINHOLE_SHAPES) | set(WORLD_SHAPES) | {"landmark_model"}
+        assert len(m["valid"]) == 100
         assert np.median(m["reprojection_error_px"][m["valid"]]) <= 12.0
         assert_one_body(m)
     for i in seen:  # one facing per moment, through the crossing (issue 24: <= 1% of joint-frames)
         assert accuracy.rotation_coherence(motions[i])["rotation_change_over_45deg"] <= 0.01
+    first = next(iter(motions.values()))
+    for m in motions.values():  # everyone on one floor, in one world frame
+        assert np.array_equal(m["floor"], first["floor"])
+        assert np.array_equal(m["camera_from_world"], first["camera_from_world"])
     main = max(seen, key=lambda i: seen[i].sum())
     assert (out / "motion.npz").read_bytes() == (out / "people" / str(main) / "motion.npz").read_bytes()
 

@@ -119,7 +119,7 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
                    for i, t in tracks.items()}
         main = main_person(motions)
-        if video and inputs.lens[0] is not None:  # a static camera's world frame, every person on one floor
+        if video and inputs.lens[0] is not None and motions:  # a static camera's world frame, everyone on one floor
             world = world_arrays(inputs.model, {i: (t.bodies.params, t.bodies.valid) for i, t in tracks.items()},
                                  main, inputs.media.fps, functools.partial(_scene_up, config, inputs, chunks))
             motions = {i: m | world.get(i, {}) for i, m in motions.items()}
