@@ -146,6 +146,9 @@ sys.exit(main(["model", "--help"]))
 MOMENTS = {
     "in an import": "os.kill(os.getpid(), signal.SIGINT); time.sleep(1)",
     "in a C extension's import": "raise ImportError('initialization failed') from KeyboardInterrupt()",
+    "swallowed by a C extension's import": ("exec('try:\\n os.kill(os.getpid(), signal.SIGINT)\\n time.sleep(1)\\n"
+                                            "except KeyboardInterrupt:\\n pass'); "
+                                            "raise ImportError('numpy._core.multiarray failed to import')"),
     "a SIGTERM in an import": "os.kill(os.getpid(), signal.SIGTERM); time.sleep(1)",
     "as the process exits": "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(1)))",
 }
