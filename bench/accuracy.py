@@ -229,6 +229,71 @@ def floor_scores(motion: dict, up: np.ndarray | None) -> dict:
                 contact_share=float(np.mean(motion["contact"][np.asarray(motion["valid"])])))
 
 
+ANKLES = (10, 11)  # the reference's (and `SMPLX_LIMB_JOINTS`') left and right ankle
+CONTACT_TOLERANCE_M = 0.02  # a heel or toe in contact within this of the floor; none below it by more
+
+
+def world_joints(motion: dict) -> np.ndarray:
+    """``(T, 127, 3)`` the SMPL-X joints of a motion in its world frame (its ``world_*`` keys; NaN where not
+    valid)."""
+    return body_joints_of(dict(motion, global_orient=motion["world_global_orient"], transl=motion["world_transl"]))
+
+
+def body_joints_of(motion: dict) -> np.ndarray:
+    """``(T, 127, 3)`` the SMPL-X joints of a motion (NaN where not valid)."""
+    import smplx_jax
+    from jaxmocap.integrate.motion_arrays import body_joints
+    from jaxmocap.motion import motion_params
+
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    joints = body_joints(model, motion_params(motion, model.num_expression)).astype(np.float64)
+    return np.where(np.asarray(motion["valid"])[:, None, None], joints, np.nan)
+
+
+def still_frames(ankles: np.ndarray, fps: float, still_m_s: float | None = None) -> np.ndarray:
+    """``(T, 2)`` where each of the reference's ankles ``(T, 2, 3)`` stands still: slower than ``still_m_s``
+    (default `ground.REST_SPEED_M_S`, the run's own rule: far below a step's speed, above what the reference's
+    1-2 cm of noise gives over the window) over `ground.SPEED_WINDOW_S` about the frame."""
+    from jaxmocap.integrate.ground import REST_SPEED_M_S, SPEED_WINDOW_S
+
+    half = max(1, round(SPEED_WINDOW_S * fps / 2))
+    speed = np.full(ankles.shape[:2], np.inf)
+    speed[half:-half] = np.linalg.norm(ankles[2 * half:] - ankles[:-2 * half], axis=-1) * fps / (2 * half)
+    return np.nan_to_num(speed, nan=np.inf) < (REST_SPEED_M_S if still_m_s is None else still_m_s)
+
+
+def world_scores(motion: dict, reference: np.ndarray) -> dict:
+    """The world frame against the reference: WA-MPJPE of the world joints (mm); while a reference ankle stands
+    still (`still_frames`), our ankle's mean frame-to-frame movement after the whole-clip alignment over the
+    reference's own there (``sliding_ratio``; both in mm per frame); the share of heel and toe frames in contact
+    whose sole is within `CONTACT_TOLERANCE_M` of the floor and the lowest sole of any valid frame (cm)."""
+    if "world_transl" not in motion:
+        return dict(world_wa_mpjpe_mm=None, sliding_ratio=None, contact_on_floor=None, lowest_sole_cm=None)
+    import smplx_jax
+    from jaxmocap.integrate.ground import FOOT_JOINTS, sole_heights
+
+    joints = world_joints(motion)
+    limbs = joints[:, SMPLX_LIMB_JOINTS]
+    present = np.all(np.isfinite(reference), -1) & np.all(np.isfinite(limbs), -1)
+    scored = present.sum(1) >= MIN_JOINTS
+    wa = whole_clip_error_mm(limbs[scored], reference[scored], present[scored])
+    aligned = np.full_like(limbs, np.nan)
+    aligned[scored] = procrustes_align(limbs[scored].reshape(-1, 3), np.nan_to_num(reference[scored]).reshape(-1, 3),
+                                       present[scored].ravel()).reshape(-1, 12, 3)
+    still = still_frames(reference[:, ANKLES], float(motion["fps"]))
+    pairs = still[:-1] & still[1:] & scored[:-1, None] & scored[1:, None]
+    moved = [1000 * np.linalg.norm(np.diff(x[:, ANKLES], axis=0), axis=-1)[pairs] for x in (aligned, reference)]
+    valid = np.asarray(motion["valid"])
+    model = smplx_jax.load_model(smplx_jax.default_model_path())
+    soles = joints[:, FOOT_JOINTS, 1] - sole_heights(model, motion["betas"][np.argmax(valid)])
+    contact = np.asarray(motion["contact"]) & valid[:, None]
+    return dict(world_wa_mpjpe_mm=wa, sliding_ratio=float(np.nanmean(moved[0]) / np.nanmean(moved[1])),
+                still_ankle_mm=float(np.nanmean(moved[0])), reference_still_mm=float(np.nanmean(moved[1])),
+                contact_on_floor=float(np.mean(np.abs(soles[contact]) <= CONTACT_TOLERANCE_M))
+                if contact.any() else None,
+                lowest_sole_cm=float(100 * np.min(soles[valid])) if valid.any() else None)
+
+
 def fingers_bent_backwards(motion: dict, tolerance_deg: float = 10.0) -> float:
     """The share of finger joint-frames (index to ring, both hands, valid frames) bent backwards, against their
     flexion, by more than ``tolerance_deg``."""
@@ -287,15 +352,7 @@ def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str =
 
 def limb_joints(motion: dict) -> np.ndarray:
     """``(T, 12, 3)`` SMPL-X limb joints of a motion (NaN where not valid)."""
-    import jax
-
-    import smplx_jax
-    from jaxmocap.motion import motion_params
-
-    model = smplx_jax.load_model(smplx_jax.default_model_path())
-    joints = np.asarray(jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))(
-        model, motion_params(motion, model.num_expression)))[:, SMPLX_LIMB_JOINTS]
-    return np.where(np.asarray(motion["valid"])[:, None, None], joints, np.nan)
+    return body_joints_of(motion)[:, SMPLX_LIMB_JOINTS]
 
 
 def report_view(name: str, stages: Stages, reference: np.ndarray, up: np.ndarray | None = None) -> dict:
@@ -309,11 +366,11 @@ def report_view(name: str, stages: Stages, reference: np.ndarray, up: np.ndarray
             motion = getattr(stages, stage)
             rows[stage] |= rotation_coherence(motion) | dict(fingers_backwards=fingers_bent_backwards(motion))
             if stage != "ik":
-                errors = np.asarray(motion["reprojection_error_px"])[np.asarray(motion["valid"])]
-                rows[stage] |= floor_scores(motion, up) | dict(valid_share=float(np.mean(motion["valid"])),
-                                    reprojection_median_px=float(np.median(errors)),
-                                    reprojection_over_40px=float(np.mean(np.asarray(motion["reprojection_error_px"])
-                                                                         > 40)))
+                errors = np.asarray(motion["reprojection_error_px"])
+                rows[stage] |= floor_scores(motion, up) | world_scores(motion, reference) | dict(
+                    valid_share=float(np.mean(motion["valid"])),
+                    reprojection_median_px=float(np.median(errors[np.asarray(motion["valid"])])),
+                    reprojection_over_40px=float(np.mean(errors > 40)))
     return rows
 
 
@@ -441,6 +498,18 @@ def main():
                 print(f"{name:>14} {model:>6} {stage:>10} {r['frames_scored']:>6} {r['pa_mpjpe_mm']:>11.1f} "
                       f"{r['wa_mpjpe_mm']:>8.0f} {r['flexion_mae_deg']:>8.1f}° {r['accel_error_mm']:>7.1f} {extra} "
                       f"{coherence}")
+    print(f"\nworld frame: {'case':>14} {'model':>6} {'floor':>6} {'world WA':>8} {'still ankle mm':>14} "
+          f"{'ref mm':>6} {'ratio':>5} {'contact':>7} {'on floor':>8} {'lowest sole':>11}")
+    for model, cases in results.items():
+        for name, rows in cases.items():
+            r = rows["motion"]
+            if r.get("world_wa_mpjpe_mm") is None or r["floor_angle_deg"] is None:  # (pan: a moving camera)
+                continue
+            floor = "-" if r["floor_angle_deg"] is None else f"{r['floor_angle_deg']:.1f}°"
+            on_floor = "-" if r["contact_on_floor"] is None else f"{100 * r['contact_on_floor']:.0f}%"
+            print(f"{'':>12} {name:>14} {model:>6} {floor:>6} {r['world_wa_mpjpe_mm']:>8.0f} "
+                  f"{r['still_ankle_mm']:>14.1f} {r['reference_still_mm']:>6.1f} {r['sliding_ratio']:>5.2f} "
+                  f"{100 * r['contact_share']:>6.0f}% {on_floor:>8} {r['lowest_sole_cm']:>9.1f}cm")
     print()
     print("\n".join(side_by_side(results)))
     args.out.mkdir(parents=True, exist_ok=True)

@@ -11,6 +11,7 @@ import numpy as np
 from jaxmocap.render import draw_mesh
 from smplx_jax.rotations import rotvec_to_rotmat
 
+GROUND = (200, 205, 200)  # the side view's floor
 _TURN = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # a quarter turn about the image's y axis
 
 
@@ -114,18 +115,26 @@ def body_up(global_orient: np.ndarray) -> np.ndarray:
 
 
 def side_view(people: list[Posed], faces: np.ndarray, size: tuple[int, int], pixels_per_metre: float,
-              centre: np.ndarray, detail: float = 0.5, up: np.ndarray | None = None) -> np.ndarray:
+              centre: np.ndarray, detail: float = 0.5, up: np.ndarray | None = None,
+              floor: np.ndarray | None = None) -> np.ndarray:
     """The people's meshes seen from the side (the image's x axis turned into depth), stood up on ``up`` (the
     camera-frame vertical, default the image's), on a plain background; rendered at ``detail`` times the size
-    and scaled up (rasterising cost grows with the pixels covered)."""
+    and scaled up (rasterising cost grows with the pixels covered). ``floor``: motion.npz's ``(nx, ny, nz, d)``
+    in the camera's frame, whose normal is then the view's up: drawn as the ground under the people."""
     width, height = size
     small = (max(1, round(width * detail)), max(1, round(height * detail)))
+    up = up if floor is None else np.asarray(floor[:3], np.float64)
     level = np.eye(3) if up is None else upright(up)
-    points = []
-    for person in people:
-        turned = (person.vertices - centre) @ (_TURN @ level).T * (pixels_per_metre * detail)
-        points.append(np.concatenate([turned[:, :2] + [small[0] / 2, small[1] / 2], turned[:, 2:]], axis=1))
+
+    def placed(points: np.ndarray) -> np.ndarray:  # camera frame -> the small image's pixels and depth
+        turned = (points - centre) @ (_TURN @ level).T * (pixels_per_metre * detail)
+        return np.concatenate([turned[:, :2] + [small[0] / 2, small[1] / 2], turned[:, 2:]], axis=1)
+
+    points = [placed(person.vertices) for person in people]
     background = np.full((small[1], small[0], 3), 235, np.uint8)
+    if floor is not None:  # the plane seen edge on: the rows below its line
+        row = placed(-float(floor[3]) * up[None] / np.linalg.norm(up))[0, 1]
+        background[int(np.clip(np.ceil(row), 0, small[1])):] = GROUND
     image = draw_mesh(background, *_joined(points, people, faces)) if people else background
     return cv2.resize(image, size, interpolation=cv2.INTER_LINEAR)
 
@@ -138,12 +147,13 @@ class OverlayWriter:
 
     def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, faces: np.ndarray,
                  max_height: int = 960, lens: tuple = (None, None), up: np.ndarray | None = None,
-                 spread: float = 0.0):
+                 spread: float = 0.0, floor: np.ndarray | None = None):
         width, height = frame_size
         self.spread = spread  # metres between the people, at most: the side view's scale leaves room for it
         self.faces = np.asarray(faces)
         self.lens = lens  # (focal_length, principal_point) of a pinhole camera, or (None, None)
         self.up = up  # the side view's vertical in the camera frame (`body_up`)
+        self.floor = floor  # motion.npz's floor, or None (`side_view`)
         self.scale = min(1.0, max_height / height)
         self.panel = (int(round(width * self.scale)), int(round(height * self.scale)))
         self.path = Path(path)
@@ -167,7 +177,8 @@ class OverlayWriter:
         if self.pixels_per_metre is None:
             tallest = max(float((p.vertices.max(axis=0) - p.vertices.min(axis=0)).max()) for p in people)
             self.pixels_per_metre = 0.75 * self.panel[1] / (tallest + self.spread)
-        right = side_view(list(people), self.faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up)
+        right = side_view(list(people), self.faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up,
+                          floor=self.floor)
         return np.concatenate([left, right], axis=1)
 
     def write(self, *frames: tuple[np.ndarray, list[Posed]]) -> None:

@@ -14,6 +14,7 @@ import smplx_jax
 from conftest import load
 from jaxmocap.errors import InputError
 from jaxmocap.integrate import ground
+from jaxmocap.integrate.motion_arrays import body_joints
 from jaxmocap.motion import WORLD_SHAPES, write_motion
 from smplx_jax import rotations
 
@@ -56,6 +57,12 @@ def stepping(model, rotation: np.ndarray, t: np.ndarray, seed: int = 0):
     return params, still
 
 
+def world_keys(model, params, valid) -> dict:
+    """One person's world keys, standing on the floor their motion shows."""
+    people = {0: (params, valid)}
+    return ground.world_arrays(model, people, 0, ground.standing(model, people, FPS))[0]
+
+
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1.0, 1.0))))
 
@@ -65,14 +72,14 @@ def test_the_floor_and_the_world_frame_of_a_body_stepping_on_it(model, pitch, ro
     rotation, t = _camera_from_world(pitch, roll)
     params, still = stepping(model, rotation, t)
     valid = np.ones(len(still), bool)
-    world = ground.world_arrays(model, {0: (params, valid)}, 0, FPS)[0]
+    world = world_keys(model, params, valid)
     assert _angle_deg(world["floor"][:3], rotation[:, 1]) < 0.1  # the world's up seen from the camera
     camera_from_world = world["camera_from_world"]
     assert np.ptp(camera_from_world, axis=0).max() == 0.0 and _angle_deg(camera_from_world[0, :3, 1],
                                                                           rotation[:, 1]) < 0.1
     moved = dataclasses.replace(params, global_orient=world["world_global_orient"], transl=world["world_transl"])
-    in_world = ground.camera_joints(model, moved)
-    in_camera = ground.camera_joints(model, params)
+    in_world = body_joints(model, moved)
+    in_camera = body_joints(model, params)
     rot, shift = camera_from_world[0, :3, :3], camera_from_world[0, :3, 3]
     assert np.abs(in_world @ rot.T + shift - in_camera).max() < 1e-3  # the same body, 1 mm
     soles = in_world[:, ground.FOOT_JOINTS, 1] - ground.sole_heights(model, np.zeros(model.num_betas))
@@ -84,20 +91,29 @@ def test_the_floor_and_the_world_frame_of_a_body_stepping_on_it(model, pitch, ro
     assert abs(first_pelvis[0]) < 1e-3 and abs(first_pelvis[2]) < 1e-3  # the origin under the first pelvis
 
 
+def test_heels_and_toes_stand_above_the_rest_meshs_soles(model):
+    """`ground.sole_heights` from the shaped template: the rest pose's mesh (`smplx_jax.forward`) gives the same."""
+    betas = np.random.default_rng(0).normal(size=model.num_betas).astype(np.float32)
+    rest = smplx_jax.SMPLXParams.zeros(model.num_betas, model.num_expression)
+    out = smplx_jax.forward(model, dataclasses.replace(rest, betas=betas))
+    expected = np.asarray(out.joints)[list(ground.FOOT_JOINTS), 1] - np.asarray(out.vertices)[:, 1].min()
+    np.testing.assert_allclose(ground.sole_heights(model, betas), expected, atol=1e-6)
+
+
 def test_the_floor_holds_under_depth_noise(model):
     """Each frame's depth off by 3 cm (a monocular fit's noise), its x and y by 5 mm: the floor within 1 degree."""
     rotation, t = _camera_from_world(25.0, 8.0)
     params, still = stepping(model, rotation, t, seed=1)
     noise = np.random.default_rng(2).normal(size=params.transl.shape) * np.array([0.005, 0.005, 0.03])
     noisy = dataclasses.replace(params, transl=(params.transl + noise).astype(np.float32))
-    world = ground.world_arrays(model, {0: (noisy, np.ones(len(still), bool))}, 0, FPS)[0]
+    world = world_keys(model, noisy, np.ones(len(still), bool))
     assert _angle_deg(world["floor"][:3], rotation[:, 1]) < 1.0
 
 
 def test_smplx_gives_the_world_body_from_the_world_keys(model, default_model_dir):
     rotation, t = _camera_from_world(25.0, 8.0)
     params, still = stepping(model, rotation, t)
-    world = ground.world_arrays(model, {0: (params, np.ones(len(still), bool))}, 0, FPS)[0]
+    world = world_keys(model, params, np.ones(len(still), bool))
     frames = slice(0, len(still), 10)
     peer = smplx.create(str(default_model_dir), model_type="smplx", num_betas=10, num_expression_coeffs=10,
                         use_pca=False, flat_hand_mean=True, batch_size=len(still[frames]))
@@ -105,7 +121,7 @@ def test_smplx_gives_the_world_body_from_the_world_keys(model, default_model_dir
         joints = peer(global_orient=torch.tensor(world["world_global_orient"][frames]),
                       transl=torch.tensor(world["world_transl"][frames])).joints.numpy()
     rot, shift = world["camera_from_world"][0, :3, :3], world["camera_from_world"][0, :3, 3]
-    camera = ground.camera_joints(model, jax.tree.map(lambda a: a[frames], params))
+    camera = body_joints(model, jax.tree.map(lambda a: a[frames], params))
     assert np.abs((camera - shift) @ rot - joints).max() < 1e-3
 
 

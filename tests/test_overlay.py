@@ -9,6 +9,7 @@ import numpy as np
 import smplx_jax
 from conftest import load
 from jaxmocap.overlay import (
+    GROUND,
     OverlayWriter,
     Posed,
     body_up,
@@ -16,9 +17,11 @@ from jaxmocap.overlay import (
     people_over_frame,
     person_colour,
     shrunk,
+    side_view,
     upright,
 )
 from jaxmocap.poses import example_pose
+from smplx_jax.rotations import rotvec_to_rotmat
 
 CLIP = Path(__file__).parents[1] / "jaxmocap" / "data" / "pose2sim_single_cam01.mp4"
 
@@ -68,6 +71,24 @@ def test_the_side_view_stands_the_body_up():
         np.testing.assert_allclose(level @ up, [0, -1, 0], atol=1e-6)
         np.testing.assert_allclose(level @ level.T, np.eye(3), atol=1e-6)
         assert np.linalg.det(level) > 0
+
+
+def test_the_side_view_draws_the_floor_under_the_feet(default_model_dir):
+    """A body standing on its floor (the plane of its soles, tilted with it as a camera looking down sees it):
+    seen from the side, the ground's rows begin where its feet end, within two pixels, and the body stands up."""
+    model = load(default_model_dir)
+    vertices, _ = _posed(model)
+    tilt = np.asarray(rotvec_to_rotmat(np.array([0.5, 0.0, 0.0], np.float32)), np.float64)
+    vertices = vertices @ tilt.T + [0.0, 0.0, 4.0]
+    normal = tilt @ [0.0, -1.0, 0.0]  # the body's up in the camera frame
+    floor = np.append(normal, -float(np.min(vertices @ normal)))
+    size, faces = (300, 400), np.asarray(model.faces)
+    view = side_view([Posed(0, vertices, 1.0, np.zeros(2))], faces, size, 150.0, vertices.mean(0), detail=1.0,
+                     floor=floor)
+    ground_rows = np.flatnonzero(np.all(view[:, 5] == GROUND, -1))
+    body = np.argwhere(np.any(view != 235, -1) & np.any(view != GROUND, -1))
+    assert len(ground_rows) and abs(ground_rows.min() - (body[:, 0].max() + 1)) <= 2, (ground_rows.min(), body.max(0))
+    assert np.ptp(body[:, 0]) > 0.8 * 150.0 * np.ptp(vertices @ normal)  # standing: its height is the view's
 
 
 def test_overlay_video_frames_and_size(default_model_dir, tmp_path):

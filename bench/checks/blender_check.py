@@ -2,8 +2,10 @@
 through ``io_scene_gltf2``, in a fresh empty scene of Blender as a Python module (``bpy``), with what the
 importers print captured. Per file it reports the armature's bones, the bones the importer found of zero length
 (and lengthened: Blender's BVH importer prints ``zero length node found`` / ``zero length bone found``), the
-shortest bone, the animation's frames, and any other warning or error lines; it exits 1 unless every file
-imports with no zero-length bone, warning or error.
+shortest bone, the animation's frames, where the body stands at the first frame (``lowest_m``: Blender's z, up, of
+the lowest evaluated mesh vertex of a glTF, of the lowest bone head or tail of a BVH; an export in the world frame
+stands on the floor z = 0), and any other warning or error lines; it exits 1 unless every file imports with no
+zero-length bone, warning or error.
 
 ``bpy`` is large (~400 MB) and needs its own Python version (bpy 4.x and 5.0: Python 3.11), so it lives in a
 separate virtual environment, not in the project's:
@@ -61,6 +63,8 @@ def check(path: str) -> dict:
     bones = [b for a in armatures for b in a.data.bones]
     actions = list(bpy.data.actions)
     zero = [line.split(":", 1)[-1].strip() for line in output if "zero length" in line]
+    if actions:
+        bpy.context.scene.frame_set(round(actions[0].frame_range[0]))
     return {
         "file": path, "blender": bpy.app.version_string, "result": sorted(result),
         "armatures": len(armatures), "bones": len(bones), "zero_length_bones": zero,
@@ -68,9 +72,21 @@ def check(path: str) -> dict:
         "shortest_bone": min(bones, key=lambda b: b.length).name if bones else None,
         "meshes": {o.name: len(o.data.vertices) for o in bpy.data.objects if o.type == "MESH"},  # glTF: + bone shape
         "frames": [round(v) for v in actions[0].frame_range] if actions else None,
+        "lowest_m": _lowest(armatures),
         "warnings": [line for line in output if _NOISE.search(line) and "zero length" not in line],
         "error": error,
     }
+
+
+def _lowest(armatures) -> float | None:
+    """Blender's z of the lowest point at the scene's frame: of the evaluated (skinned) meshes' vertices where there
+    are meshes, else of the armatures' posed bones' heads and tails."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    meshes = [o.evaluated_get(depsgraph) for o in bpy.data.objects if o.type == "MESH" and len(o.data.vertices) > 100]
+    if meshes:
+        return round(min(min((o.matrix_world @ v.co).z for v in o.to_mesh().vertices) for o in meshes), 4)
+    points = [(a.matrix_world @ p).z for a in armatures for b in a.pose.bones for p in (b.head, b.tail)]
+    return round(min(points), 4) if points else None
 
 
 def main(paths) -> int:

@@ -19,7 +19,7 @@ motion.npz arrays), `synthetic` (problems with known answers for tests and bench
 """
 
 from jaxmocap.integrate.camera import project, weak_perspective_from_points
-from jaxmocap.integrate.clip import ClipConfig, ClipResult, fit_clip
+from jaxmocap.integrate.clip import ClipConfig, ClipGround, ClipResult, fit_clip
 from jaxmocap.integrate.copy_and_paste import copy_paste, wrist_local_rotvecs
 from jaxmocap.integrate.eft import EFTConfig, EFTResult, fine_tune
 from jaxmocap.integrate.fitting import FitConfig, FitResult, default_pose, fit, fit_frame
@@ -29,8 +29,9 @@ from jaxmocap.integrate.motion_arrays import fitted_motion, reprojection_errors
 from jaxmocap.integrate.smooth import KERNEL, smooth_camera, smooth_linear, smooth_params, smooth_rotvecs
 
 __all__ = [
-    "ClipConfig", "ClipResult", "EFTConfig", "EFTResult", "FitConfig", "FitResult", "HandClipResult", "KERNEL",
-    "body_from_blazepose", "copy_paste", "default_pose", "fine_tune", "fit", "fit_clip", "fit_frame", "fit_hand_clip",
+    "ClipConfig", "ClipGround", "ClipResult", "EFTConfig", "EFTResult", "FitConfig", "FitResult", "HandClipResult",
+    "KERNEL", "body_from_blazepose", "copy_paste", "default_pose", "fine_tune", "fit", "fit_clip", "fit_frame",
+    "fit_hand_clip",
     "fitted_motion", "hand_into_body", "ik", "project", "reprojection_errors", "smooth_camera", "smooth_linear",
     "smooth_params", "smooth_rotvecs", "weak_perspective_from_points", "wrist_local_rotvecs",
 ]

@@ -21,7 +21,10 @@ squared normalised errors whose balance holds for any video:
   frame rate squared, in m/s^2 over ``acceleration_sigma``, and of the body joints' rotations, in rad/s^2 over
   ``angular_acceleration_sigma`` (a twist the keypoints hardly see turns smoothly too); a frame's acceleration is
   expected within them at any frame rate;
-* the shape: ``betas`` over one standard deviation of the population (the model's shape space is whitened).
+* the shape: ``betas`` over one standard deviation of the population (the model's shape space is whitened);
+* the ground, where a floor is known (`ClipGround`, the camera's frame; a static camera): a heel or toe carrying
+  weight touches the floor (its sole's height over ``contact_height_sigma_m``) and does not move (its velocity, in
+  m/s over ``planted_speed_sigma``); no heel or toe sinks below it (the depth below, over the same sigma).
 
 Frames where the person is not ``found`` hold their start and weigh nothing. Solved by `ClipLevenbergMarquardt`
 (an `optimistix` least-squares solver, matrix-free: conjugate gradients on the damped Gauss-Newton system of the
@@ -84,6 +87,12 @@ class ClipConfig:
     hinge_sigma_deg: float = 10.0  # the fingers (index to ring) off their flexion axis
     limit_sigma_deg: float = 3.0  # beyond a joint's range
     betas_sigma: float = 1.0  # standard deviations of the shape space
+    # metres: a sole carrying weight off the floor's plane (the floor's unevenness, a shoe's sole pressed, the heel's
+    # or toe's point on the sole shifting as the foot rolls), and how far a heel or toe sinks through it
+    contact_height_sigma_m: float = 0.01
+    # m/s: a heel or toe carrying weight rolls on the floor but does not slide (the reference's planted markers
+    # jitter by a few millimetres a frame, a fifth of a metre per second at 60 frames/s: no foot's true speed)
+    planted_speed_sigma: float = 0.05
     # converged when the decrease the model predicts to the optimum is below this per frame, in the cost's units
     # (half a squared standard error, i.e. the negative log-likelihood): then every frame is within
     # sqrt(2 * 0.1) = 0.45 standard errors of its optimum along the step, well inside what its observations decide
@@ -96,6 +105,27 @@ class ClipUnknowns(NamedTuple):
     pose_rotvecs: Float[Array, "T 52 3"]  # axis-angles, SMPL-X's joints of SOLVED_JOINTS
     transl: Float[Array, "T 3"]  # the body's origin in the camera frame, metres
     betas: Float[Array, "B"]
+
+
+FOOT_KEYPOINTS = (21, 19, 24, 22)  # left heel, left big toe, right heel, right big toe (BODY_25 of SMPL-X's 62, 60,
+# 65, 63: `integrate.ground.FOOT_JOINTS`)
+
+
+class ClipGround(NamedTuple):
+    """The floor of a clip fit and which feet carry weight on it (all arrays: one compiled solver serves clips with
+    and without one): ``floor (4,)`` the plane ``n · X + d = 0`` in the camera's frame (``(nx, ny, nz, d)``, ``n``
+    the unit up direction), ``above_sole (4,)`` each of `FOOT_KEYPOINTS`' height above its sole with the foot flat
+    (metres), ``contact (T, 4)`` 1 where that heel or toe carries weight, ``known`` 1 where there is a floor (0: no
+    ground residual)."""
+
+    floor: Float[Array, "4"]
+    above_sole: Float[Array, "4"]
+    contact: Float[Array, "T 4"]
+    known: Float[Array, ""]
+
+    @classmethod
+    def none(cls, frames: int, dtype=jnp.float32) -> "ClipGround":
+        return cls(jnp.zeros(4, dtype), jnp.zeros(4, dtype), jnp.zeros((frames, 4), dtype), jnp.zeros((), dtype))
 
 
 class ClipData(NamedTuple):
@@ -115,6 +145,7 @@ class ClipData(NamedTuple):
     principal_point: Float[Array, "2"]
     fps: Float[Array, ""]
     fit_betas: Float[Array, ""]  # 1: the shape is solved for; 0: it holds the start's
+    ground: ClipGround
 
 
 class ClipResiduals(NamedTuple):
@@ -237,9 +268,40 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
                             lost[:, None, None] * (y.transl - data.start.transl)[:, None]], 1)
     t = x.shape[0]
     shared = jnp.where(data.fit_betas > 0, y.betas / config.betas_sigma, y.betas - data.start.betas)
+    touching, sinking, sliding = ground_residuals(x, data, config)
     frames = jnp.concatenate([reprojection.reshape(t, -1), direction.reshape(t, -1), limits, prior.reshape(t, -1),
-                              hold.reshape(t, -1)], 1)
-    return ClipResiduals(frames, motion_residuals(x, y.pose_rotvecs, motion_rows(data), data.fps, config), shared)
+                              hold.reshape(t, -1), touching, sinking], 1)
+    motion = motion_residuals(x, y.pose_rotvecs, motion_rows(data), data.fps, config)
+    return ClipResiduals(frames, jnp.concatenate([motion, sliding.reshape(t, -1)], 1), shared)
+
+
+def contact_weights(data: ClipData) -> tuple[Float[Array, "T 4"], Float[Array, "T 4"], Float[Array, "T 4"]]:
+    """Where each of `FOOT_KEYPOINTS` touches the floor, where it may not sink below it (elsewhere on a known
+    floor), and where it stays put from one frame to the next (in contact in both; zero in the last frame), in the
+    frames where the person is found."""
+    ground, found = data.ground, data.found[:, None]
+    touching = ground.known * ground.contact * found
+    free = ground.known * (1.0 - ground.contact) * found
+    planted = jnp.concatenate([touching[:-1] * touching[1:], jnp.zeros_like(touching[:1])])
+    return touching, free, planted
+
+
+def sole_heights(x: Float[Array, "T 67 3"], ground: ClipGround) -> Float[Array, "T 4"]:
+    """How far each of `FOOT_KEYPOINTS`' soles is above the floor (metres; negative below it), the foot flat."""
+    return x[:, FOOT_KEYPOINTS] @ ground.floor[:3] + ground.floor[3] - ground.above_sole
+
+
+def ground_residuals(x: Float[Array, "T 67 3"], data: ClipData, config: ClipConfig
+                     ) -> tuple[Float[Array, "T 4"], Float[Array, "T 4"], Float[Array, "T 4 3"]]:
+    """The ground's residuals (module docstring): each heel's and toe's sole height where it touches the floor, its
+    depth below the floor elsewhere, its velocity (to the next frame, m/s) where it is planted, each over its
+    sigma."""
+    touching, free, planted = contact_weights(data)
+    height = sole_heights(x, data.ground) / config.contact_height_sigma_m
+    feet = x[:, FOOT_KEYPOINTS]
+    velocity = jnp.concatenate([feet[1:] - feet[:-1], jnp.zeros_like(feet[:1])]) * data.fps
+    return (touching * height, free * jax.nn.relu(-height),
+            planted[..., None] * velocity / config.planted_speed_sigma)
 
 
 def motion_residuals(x: Float[Array, "T K 3"], pose_rotvecs: Float[Array, "T J 3"], rows: Float[Array, "T K"],
@@ -404,6 +466,14 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     eye = jnp.eye(3, dtype=x.dtype)
     motion = (coefficient * (data.fps**2 / config.acceleration_sigma) ** 2)[..., None, None] * jnp.broadcast_to(
         eye, image.shape)
+    # the ground's: a sole's height along the floor's normal, where it touches or sinks; a planted foot's velocity
+    touching, free, planted = contact_weights(data)
+    normal = data.ground.floor[:3]
+    across_floor = (touching + free * (sole_heights(x, data.ground) < 0)) / config.contact_height_sigma_m**2
+    still = (data.fps / config.planted_speed_sigma) ** 2
+    rolling = still * (planted + jnp.concatenate([jnp.zeros_like(planted[:1]), planted[:-1]]))
+    motion = motion.at[:, FOOT_KEYPOINTS].add(across_floor[..., None, None] * jnp.outer(normal, normal)
+                                               + rolling[..., None, None] * eye)
     unit, length = _bones(x)
     weight = (data.direction_weight * data.found[:, None] * bone_weight
               / (np.radians(config.direction_sigma_deg) * length) ** 2)
@@ -419,8 +489,11 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     diagonal, hands, jacobian, arm_jacobians, hand_jacobians = jax.vmap(
         _frame_blocks, in_axes=(None, 0, 0, 0, 0, 0, 0, 0))(km, lin, image, motion, bone_metric, axis_weight,
                                                             to_theta, lost)
-    # the accelerations couple each frame with the two before and after it (`residuals`' rows, by frame)
+    # the accelerations couple each frame with the two before and after it (`residuals`' rows, by frame), a planted
+    # foot's velocity with the next
     coupling = (data.fps**2 / config.acceleration_sigma) ** 2
+    sliding = jnp.zeros_like(rows).at[:, FOOT_KEYPOINTS].set(planted) * jnp.where(
+        coupling > 0, still / jnp.maximum(coupling, 1e-30), 0.0)
 
     def across_one(by, weight, j):  # sum_k weight[t, k] J[t + by, k]^T J[t, k] of each t, zero past the end
         frames, m = j.shape[0], j.shape[-1]
@@ -448,7 +521,7 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     diagonal = diagonal + (body_after + 4 * body_rows + jnp.concatenate([zero[:, 0], body_rows[:-1]]))[
         :, None, None] * turning
     body = banded.Banded(diagonal,
-                         coupling * across(1, -2 * rows - 2 * after)
+                         coupling * across(1, -2 * rows - 2 * after - sliding)
                          + (-2 * body_rows - 2 * body_after)[:, None, None] * turning,
                          coupling * across(2, after) + body_after[:, None, None] * turning)
     far = jnp.zeros_like(image).at[:, bones[1]].add(bone_metric)
@@ -462,7 +535,8 @@ def clip_problem(model: BodyModel | KeypointModel, keypoints: Float[ArrayLike, "
                  fps: float | Float[ArrayLike, ""], keypoint_sigma_px: Float[ArrayLike, "T 67"],
                  directions: Float[ArrayLike, "T N 3"] | None = None,
                  direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
-                 fit_betas: bool | Bool[ArrayLike, ""] = True) -> tuple[ClipUnknowns, ClipData]:
+                 fit_betas: bool | Bool[ArrayLike, ""] = True, ground: ClipGround | None = None
+                 ) -> tuple[ClipUnknowns, ClipData]:
     """The start and the data of `fit_clip`'s problem (its arguments; ``model`` or its OpenPose keypoint model,
     `fitting.openpose_keypoint_model`, already built), for `residuals`, `preconditioner` and `solve_clip`."""
     dtype = init.global_orient.dtype
@@ -484,7 +558,9 @@ def clip_problem(model: BodyModel | KeypointModel, keypoints: Float[ArrayLike, "
                     jnp.asarray(directions, dtype), jnp.asarray(direction_weight, dtype), found_f, start,
                     pose[:, list(FIXED_JOINTS)], jnp.asarray(focal_length, dtype),
                     jnp.asarray(principal_point, dtype), jnp.asarray(fps, dtype),
-                    jnp.asarray(fit_betas, dtype))
+                    jnp.asarray(fit_betas, dtype),
+                    ClipGround.none(t, dtype) if ground is None else jax.tree.map(lambda a: jnp.asarray(a, dtype),
+                                                                                  ClipGround(*ground)))
     return start, data
 
 
@@ -493,7 +569,7 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
              fps: float | Float[ArrayLike, ""],
              keypoint_sigma_px: Float[ArrayLike, "T 67"], directions: Float[ArrayLike, "T N 3"] | None = None,
              direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
-             fit_betas: bool = True, config: ClipConfig | None = None,
+             fit_betas: bool = True, ground: ClipGround | None = None, config: ClipConfig | None = None,
              adjoint: optx.AbstractAdjoint | None = None) -> ClipResult:
     """Fit one person's clip (module docstring). ``keypoints (T, 67, 3)``: OpenPose BODY_25 and both hands, x, y
     in pixels and a confidence (0, NaN or inf: missing); ``init``: each frame's start (T leading; ``transl`` in the
@@ -501,7 +577,8 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
     in pixels; ``fps`` the clip's frame rate; ``keypoint_sigma_px`` each keypoint's detector noise, pixels;
     ``directions`` and ``direction_weight``: the observed unit direction of each of `BONES` in the camera's axes
     and its confidence (None: no 3D observation); ``found``: where the person is (default: where any keypoint
-    is); ``fit_betas`` False holds the shape at the start's.
+    is); ``fit_betas`` False holds the shape at the start's; ``ground`` the floor and the feet's contacts
+    (`ClipGround`; None: no floor).
 
     Pure: works under `jax.jit` (one program per clip length) and `jax.grad`; gradients with respect to the
     observations come from implicit differentiation of the optimum (``adjoint`` None, `optimistix.ImplicitAdjoint`:
@@ -510,7 +587,7 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
     on every device, as `fitting.fit_one`'s."""
     problem = clip_problem(model, keypoints, init, focal_length=focal_length, principal_point=principal_point, fps=fps,
                            keypoint_sigma_px=keypoint_sigma_px, directions=directions,
-                           direction_weight=direction_weight, found=found, fit_betas=fit_betas)
+                           direction_weight=direction_weight, found=found, fit_betas=fit_betas, ground=ground)
     return solve_clip(*problem, shape_moves=fit_betas, num_expression=model.num_expression, config=config,
                       adjoint=adjoint)
 

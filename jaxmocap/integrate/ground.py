@@ -8,21 +8,20 @@ joint stands its own height above its sole, `sole_heights`), its normal drawn to
 plane; a monocular fit's feet tilt it by tens of degrees where a person stays in one place. The floor's height is
 the resting soles' either way. The world frame (`world_frame`): y up along the floor's normal, the floor (the
 soles' plane) y = 0, z the camera's forward direction along the floor, the origin on the floor under the main
-person's pelvis in their first valid frame. `world_arrays` gives motion.npz's world keys of a motion in the
-camera's frame.
+person's pelvis in their first valid frame. `standing` finds the floor and the feet's contacts of a clip's motion
+in the camera's frame (the clip fit is then refitted on them: `ClipGround`), `world_arrays` its motion.npz world
+keys.
 """
 
-import dataclasses
 import math
 from typing import NamedTuple
 
-import jax
 import numpy as np
 from jaxtyping import Bool, Float
 
 import smplx_jax
-from jaxmocap.batching import map_in_buckets
-from jaxmocap.integrate import fitting
+from jaxmocap.integrate.clip import ClipGround
+from jaxmocap.integrate.motion_arrays import body_joints
 
 FOOT_JOINTS = (62, 60, 65, 63)  # left heel, left big toe, right heel, right big toe (SMPL-X's vertex joints)
 PELVIS, NECK = 0, 12
@@ -53,21 +52,13 @@ class Floor(NamedTuple):
         return np.append(self.normal, self.offset)
 
 
-_JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
-
-
-def camera_joints(model: smplx_jax.BodyModel, params: smplx_jax.SMPLXParams) -> Float[np.ndarray, "T 127 3"]:
-    """The 127 joints of each frame's body in the camera's frame (``transl`` included)."""
-    params = jax.tree.map(lambda a: np.asarray(a, np.float32), params)
-    return map_in_buckets(lambda chunk, _: np.asarray(_JOINTS(model, chunk)), params, fitting.BUCKETS)
-
-
 def sole_heights(model: smplx_jax.BodyModel, betas: Float[np.ndarray, "B"]) -> Float[np.ndarray, "4"]:
-    """How far each heel and toe joint (`FOOT_JOINTS`) stands above the soles in the rest pose (feet flat), for
-    the shape ``betas``."""
-    rest = smplx_jax.SMPLXParams.zeros(model.num_betas, model.num_expression)
-    out = smplx_jax.forward(model, dataclasses.replace(rest, betas=np.asarray(betas, np.float32)))
-    return np.asarray(out.joints)[FOOT_JOINTS, 1] - float(np.asarray(out.vertices)[:, 1].min())
+    """How far each heel and toe joint (`FOOT_JOINTS`, vertices of the mesh) stands above the soles in the rest
+    pose (feet flat), for the shape ``betas``: the shaped template's, which the rest pose leaves as it is."""
+    shaped = np.asarray(model.template_cm, np.float64) + (
+        np.asarray(betas, np.float64) @ np.asarray(model.shapedirs_cm, np.float64)[:model.num_betas]).reshape(3, -1)
+    feet = [smplx_jax.constants.VERTEX_JOINT_IDS[joint - 55] for joint in FOOT_JOINTS]
+    return shaped[1, feet] - shaped[1].min()
 
 
 def at_rest(feet: Float[np.ndarray, "T 4 3"], valid: Bool[np.ndarray, "T"], fps: float) -> Bool[np.ndarray, "T 4"]:
@@ -161,35 +152,58 @@ def world_pose(global_orient: Float[np.ndarray, "T 3"], transl: Float[np.ndarray
     return world_orient, (pelvis - t) @ rotation - (pelvis - transl)
 
 
-def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]],
-                 main: int, fps: float, scene_up=None) -> dict[int, dict[str, np.ndarray]]:
-    """Each person's motion.npz world keys (``world_global_orient``, ``world_transl``, ``camera_from_world``,
-    ``floor``, ``contact``) from their bodies in the camera's frame and where they are valid (``people``: by
-    identity), all on one floor, the origin under ``main``; {} without a valid frame. ``scene_up(near)``: the
+class Standing(NamedTuple):
+    """The floor under a clip's people (`standing`) and, by identity, each one's heels' and toes' heights above
+    their soles (`sole_heights`) and their contacts with it (`contacts`, ``(T, 4)``)."""
+
+    floor: Floor
+    above_sole: dict[int, Float[np.ndarray, "4"]]
+    contact: dict[int, Bool[np.ndarray, "T 4"]]
+
+    def clip_ground(self, person: int) -> ClipGround:
+        """What the clip fit of ``person`` stands on (`jaxmocap.integrate.clip.ClipGround`)."""
+        return ClipGround(self.floor.array.astype(np.float32), self.above_sole[person].astype(np.float32),
+                          self.contact[person].astype(np.float32), np.float32(1.0))
+
+
+def standing(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]], fps: float,
+             scene_up=None) -> Standing | None:
+    """The floor under everyone of a clip and their feet's contacts with it, from their bodies in the camera's
+    frame and where they are valid (``people``: by identity); None without a valid frame. ``scene_up(near)``: the
     scene's vertical near the torsos' up (`jaxmocap.detect.verticals`), or None: where it gives one, it is the
     floor's normal (its edges hold it to a fraction of a degree; a monocular fit's resting feet, to several)."""
-    joints = {i: camera_joints(model, params) for i, (params, _) in people.items()}
     valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
-    if not any(v.any() for v in valid.values()):
-        return {}
+    seen = [i for i in people if valid[i].any()]
+    if not seen:
+        return None
+    joints = {i: body_joints(model, params) for i, (params, _) in people.items()}
     feet = {i: j[:, FOOT_JOINTS] for i, j in joints.items()}
     resting = {i: at_rest(feet[i], valid[i], fps) for i in people}
-    seen = [i for i in people if valid[i].any()]
-    above = {i: sole_heights(model, params.betas[np.argmax(valid[i])]) for i, (params, _) in people.items()
-             if i in seen}
+    above = {i: sole_heights(model, params.betas[np.argmax(valid[i])]) if i in seen else np.zeros(4)
+             for i, (params, _) in people.items()}
     up = torso_up(np.concatenate([joints[i] for i in seen]), np.concatenate([valid[i] for i in seen]))
     vertical = None if scene_up is None else scene_up(up)
     floor = floor_plane(np.concatenate([feet[i][valid[i]].reshape(-1, 3) for i in seen]),
                         np.concatenate([np.tile(above[i], int(valid[i].sum())) for i in seen]),
                         np.concatenate([stance_weights(resting[i])[valid[i]].ravel() for i in seen]),
                         up if vertical is None else vertical, known_up=vertical is not None)
-    first = main if valid[main].any() else seen[0]
-    camera_from_world = world_frame(floor, joints[first][np.argmax(valid[first]), PELVIS])
+    return Standing(floor, above, {i: contacts(feet[i], above[i], resting[i], floor) for i in people})
+
+
+def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]],
+                 main: int, ground: Standing) -> dict[int, dict[str, np.ndarray]]:
+    """Each person's motion.npz world keys (``world_global_orient``, ``world_transl``, ``camera_from_world``,
+    ``floor``, ``contact``) from their bodies in the camera's frame and where they are valid (``people``: by
+    identity), standing on ``ground`` (`standing` of these people), the origin under ``main`` (or the first valid
+    person)."""
+    valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
+    first = main if valid[main].any() else next(i for i in people if valid[i].any())
+    pelvis = {i: body_joints(model, params)[:, PELVIS] for i, (params, _) in people.items()}
+    camera_from_world = world_frame(ground.floor, pelvis[first][np.argmax(valid[first])])
     out = {}
     for i, (params, _) in people.items():
-        orient, transl = world_pose(params.global_orient, params.transl, joints[i][:, PELVIS], camera_from_world)
+        orient, transl = world_pose(params.global_orient, params.transl, pelvis[i], camera_from_world)
         out[i] = {"world_global_orient": orient.astype(np.float32), "world_transl": transl.astype(np.float32),
                   "camera_from_world": np.repeat(camera_from_world[None], len(valid[i]), 0).astype(np.float32),
-                  "floor": floor.array.astype(np.float32),
-                  "contact": contacts(feet[i], above.get(i, np.zeros(4)), resting[i], floor)}
+                  "floor": ground.floor.array.astype(np.float32), "contact": ground.contact[i]}
     return out

@@ -23,6 +23,16 @@ def _errors(model, params, scale, trans, keypoints, focal_length, principal_poin
     return dist.sum(1) / jnp.maximum(seen.sum(1), 1)
 
 
+_JOINTS = jax.jit(jax.vmap(smplx_jax.forward_joints, in_axes=(None, 0)))
+
+
+def body_joints(model: smplx_jax.BodyModel, params: smplx_jax.SMPLXParams) -> np.ndarray:
+    """``(T, 127, 3)`` the joints of each frame's body in the frame its ``transl`` is in (the camera's, or the
+    world's of motion.npz's world keys). One compiled program per bucket (`fitting.BUCKETS`)."""
+    params = jax.tree.map(lambda a: np.asarray(a, np.float32), params)
+    return map_in_buckets(lambda chunk, _: np.asarray(_JOINTS(model, chunk)), params, fitting.BUCKETS)
+
+
 def reprojection_errors(model, params, scale, trans, keypoints, focal_length=None, principal_point=None) -> np.ndarray:
     """Mean pixel distance per frame over keypoints with confidence > 0 (0 where none); the pinhole camera's
     pixels when ``focal_length`` is given, else the weak-perspective camera's. One compiled program per bucket

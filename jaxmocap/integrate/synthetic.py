@@ -13,7 +13,8 @@ import numpy as np
 
 from jaxmocap.integrate import clip
 from jaxmocap.integrate.fitting import default_pose, openpose_keypoint_model
-from smplx_jax import BodyModel, SMPLXParams, constants, forward_joints, rotations
+from jaxmocap.integrate.motion_arrays import body_joints
+from smplx_jax import BodyModel, SMPLXParams, constants, rotations
 
 IMAGE_SIZE = (1000, 1000)
 
@@ -64,11 +65,8 @@ def _params(theta, betas, num_expression):
                        f(theta[:, 23]), f(theta[:, 24]), f(betas), jnp.zeros((t, num_expression)), jnp.zeros((t, 3)))
 
 
-_JOINTS = jax.jit(jax.vmap(forward_joints, in_axes=(None, 0)))
-
-
 def openpose_projection(model: BodyModel, params: SMPLXParams, scale, trans) -> np.ndarray:
-    joints = np.asarray(_JOINTS(model, params))[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
+    joints = body_joints(model, params)[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
     return np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None, :]
 
 

@@ -26,7 +26,7 @@ from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import available_landmarks
 from jaxmocap.detect.verticals import Segments, scene_vertical
 from jaxmocap.frame_source import Media, open_media, sample_frames
-from jaxmocap.integrate.ground import world_arrays
+from jaxmocap.integrate.ground import standing, world_arrays
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
@@ -103,26 +103,33 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     if inputs.regression is None:
         with chrono("ik"):  # each frame's start, in windows placed by frame number (not by chunk)
             tracks = {i: with_start(inputs.model, t, inputs.lens) for i, t in tracks.items()}
+    fit, rate = _clip_fitted(config, inputs), inputs.media.fps if video and config.smooth else None
     with chrono("fit"):  # the whole clip (or the regressors' shape)
-        fit = _clip_fitted(config, inputs)
 
         def person_bodies(track):
             if fit:  # the whole clip as one fit
-                return fitted_track(inputs.model, track, inputs.lens,
-                                    inputs.media.fps if video and config.smooth else None)
+                return fitted_track(inputs.model, track, inputs.lens, rate)
             return median_shape(track.bodies)  # as regressed
 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
+    ground = None
+    if video and inputs.lens[0] is not None:  # a static camera's floor, everyone on it
+        with chrono("ground"):
+            ground = standing(inputs.model, _people(tracks), inputs.media.fps,
+                              functools.partial(_scene_up, config, inputs, chunks))
+            if ground and fit and rate:  # the clip fit refitted standing on it
+                tracks = {i: dataclasses.replace(t, bodies=fitted_track(inputs.model, t, inputs.lens, rate,
+                                                                        ground=ground.clip_ground(i)))
+                          for i, t in tracks.items()}
     with chrono("write"):
         meta = {"fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
                 "model_sha256": np.asarray(inputs.model_sha256), "landmark_model": np.asarray(inputs.landmarks)}
         motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
                    for i, t in tracks.items()}
         main = main_person(motions)
-        if video and inputs.lens[0] is not None and motions:  # a static camera's world frame, everyone on one floor
-            world = world_arrays(inputs.model, {i: (t.bodies.params, t.bodies.valid) for i, t in tracks.items()},
-                                 main, inputs.media.fps, functools.partial(_scene_up, config, inputs, chunks))
-            motions = {i: m | world.get(i, {}) for i, m in motions.items()}
+        if ground:  # a static camera's world frame, on the floor
+            world = world_arrays(inputs.model, _people(tracks), main, ground)
+            motions = {i: m | world[i] for i, m in motions.items()}
         frames = sum(len(c.frame_index) for c in chunks)
         motion = motions[main] if motions else motion_arrays(
             inputs.model, Bodies.absent(frames, inputs.model), np.zeros((frames, 67, 3)), inputs.lens) | meta
@@ -132,6 +139,11 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     store.clear()
     return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions),
                      inputs.landmarks)
+
+
+def _people(tracks: dict[int, Track]) -> dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]]:
+    """Each person's bodies and where they are valid (`integrate.ground`'s ``people``)."""
+    return {i: (t.bodies.params, t.bodies.valid) for i, t in tracks.items()}
 
 
 SCENE_FRAMES = 5  # frames of a video whose straight edges show the scene's vertical (a static camera's: the same)

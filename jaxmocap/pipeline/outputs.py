@@ -34,8 +34,10 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dic
     orients = [m["global_orient"][m["valid"]] for m in motions.values()]
     up = body_up(np.concatenate(orients)) if sum(map(len, orients)) else None
     lenses = lens(next(iter(motions.values()))) if motions else (None, None)
+    floor = next((m["floor"] for m in motions.values() if "floor" in m), None)  # everyone's
     with atomic_path(path) as tmp, \
-            OverlayWriter(tmp, image_size, media.fps, faces, lens=lenses, up=up, spread=_spread(motions)) as writer, \
+            OverlayWriter(tmp, image_size, media.fps, faces, lens=lenses, up=up, spread=_spread(motions),
+                          floor=floor) as writer, \
             tqdm(total=total, unit="frame", desc="overlay", disable=not config.progress) as bar:
         for start in range(0, total, _BATCH):
             batch = [frame for _, (_, frame) in zip(range(min(_BATCH, total - start)), frames)]

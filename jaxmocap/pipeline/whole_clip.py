@@ -5,6 +5,8 @@ spread over the run, each limb's depth in the start chosen over the whole run (`
 window by window, the choice over all frames), then the poses and translations window by window with that shape
 held. A window's result depends only on the frames it covers, so the motion is the same whatever chunks the run was
 stored in, in time linear in the run's length and memory flat (but for the choice's costs, about 2 kB a frame).
+On a known floor (`ClipGround`, from the fitted motion: `jaxmocap.integrate.ground.standing`) a fit is solved again,
+window by window from its own poses, with its feet planted where they carry weight.
 """
 
 import dataclasses
@@ -19,7 +21,7 @@ from jaxtyping import ArrayLike, Bool, Float
 
 import smplx_jax
 from jaxmocap.compile_cache import disk_jit
-from jaxmocap.integrate import ClipConfig, fit_clip
+from jaxmocap.integrate import ClipConfig, ClipGround, fit_clip
 from jaxmocap.integrate.camera import weak_perspective_least_squares
 from jaxmocap.integrate.clip import (
     BLAZEPOSE_OF_BODY25,
@@ -150,12 +152,13 @@ def window_spans(count: int):
 def _windows_of(fun):
     """``fun`` over windows, their arrays (but for the lens and frame rate) leading with a window axis; matrix
     products in full float32 on every device, as the clip fit's."""
-    def over_windows(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
-                     fit_betas: bool, config: ClipConfig):
-        def one(k, s, g, d, w, f):
-            return fun(model, k, s, focal_length, principal_point, fps, g, d, w, f, fit_betas=fit_betas, config=config)
+    def over_windows(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found,
+                     ground, *, fit_betas: bool, config: ClipConfig):
+        def one(k, s, g, d, w, f, floor):
+            return fun(model, k, s, focal_length, principal_point, fps, g, d, w, f, floor, fit_betas=fit_betas,
+                       config=config)
 
-        windows = (keypoints, start, sigma, directions, weight, found)
+        windows = (keypoints, start, sigma, directions, weight, found, ground)
         with jax.default_matmul_precision("highest"):
             if keypoints.shape[0] == 1:  # unbatched: a vmapped solve's loop selects every value it carries each step
                 return jax.tree.map(lambda a: a[None], one(*jax.tree.map(lambda a: a[0], windows)))
@@ -165,16 +168,16 @@ def _windows_of(fun):
 
 
 @_windows_of
-def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
+def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, ground, *,
          fit_betas: bool, config: ClipConfig):
     return fit_clip(model, keypoints, start, focal_length=focal_length, principal_point=principal_point, fps=fps,
                     keypoint_sigma_px=sigma, directions=directions, direction_weight=weight, found=found,
-                    fit_betas=fit_betas, config=config)
+                    fit_betas=fit_betas, ground=ground, config=config)
 
 
 @_windows_of
-def _hypotheses(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, *,
-                fit_betas: bool, config: ClipConfig):
+def _hypotheses(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found,
+                ground, *, fit_betas: bool, config: ClipConfig):
     y, data = clip_problem(model, keypoints, start, focal_length=focal_length, principal_point=principal_point,
                            fps=fps, keypoint_sigma_px=sigma, directions=directions, direction_weight=weight,
                            found=found, fit_betas=fit_betas)
@@ -264,27 +267,31 @@ class FittedClip(NamedTuple):
 
 
 def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | None,
-                 config: ClipConfig = ClipConfig()) -> Bodies:
+                 config: ClipConfig = ClipConfig(), ground: ClipGround | None = None) -> Bodies:
     """The track's bodies as one fit (`fitted_clip`) through the pinhole ``lens``, observing its 2D keypoints and
     its 3D landmarks' bone directions (`bone_directions`), a hand lost for a moment interpolated in a video:
     ``track.bodies`` is each frame's start (its ``transl`` in the camera frame); ``fps`` the frame rate (None:
-    unrelated images, no motion between them). Valid where the start was."""
+    unrelated images, no motion between them). With ``ground`` (its floor and the feet's contacts,
+    `integrate.ground.Standing.clip_ground`), ``track.bodies`` is a fit of the track already, refitted standing
+    on it. Valid where the start was."""
     if fps:
         track = with_hand_gaps_filled(track, round(HAND_GAP_SECONDS * fps))
     directions, weight = bone_directions(_observations(track), lens)
     return fitted_clip(model, track.keypoints_2d, track.bodies.params, track.found & track.bodies.valid, lens, fps,
-                       directions, weight, config).bodies
+                       directions, weight, config, ground=ground).bodies
 
 
 def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67 3"], start: smplx_jax.SMPLXParams,
                 valid: Bool[ArrayLike, "T"], lens, fps: float | None,
                 directions: Float[ArrayLike, "T N 3"] | None = None,
                 direction_weight: Float[ArrayLike, "T N"] | None = None, config: ClipConfig = ClipConfig(),
-                progress: Callable[[int], object] | None = None) -> FittedClip:
+                progress: Callable[[int], object] | None = None, ground: ClipGround | None = None) -> FittedClip:
     """One person's frames as one fit (module docstring) through the pinhole ``lens``: ``keypoints_2d`` the 2D
     targets, ``start`` each frame's start (T leading, ``transl`` in the camera frame), fitted where ``valid``;
     ``directions`` and ``direction_weight`` the bones' observed directions and their confidence (None: none
     observed, the 2D keypoints alone); ``fps`` the frame rate (None: unrelated images, no motion between them).
+    ``ground`` (`ClipGround`, ``contact (T, 4)``): the floor the person stands on and where their feet carry
+    weight; ``start`` is then a fit already (its shape held, its poses the start as they are) refitted on it.
     ``progress(frames)`` is told of each window's frames as they are fitted. Valid where ``valid`` and finite."""
     valid = np.asarray(valid, bool)
     count = len(valid)
@@ -297,6 +304,7 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
         direction_weight = np.zeros((count, len(BONES)), np.float32)
     directions, weight = np.asarray(directions, np.float32), np.asarray(direction_weight, np.float32)
     focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
+    floor = jax.tree.map(lambda a: np.asarray(a, np.float32), ClipGround.none(count) if ground is None else ground)
 
     def solve(fit, frames, found, rate, betas=None):
         """Windows of frames ``frames`` ``(W, F)`` (indices, padded with repeats), each as one clip, the shape
@@ -304,8 +312,12 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
         pick = jax.tree.map(lambda a: np.asarray(a)[frames], start)
         if betas is not None:
             pick = pick.replace(betas=np.broadcast_to(betas, pick.betas.shape).astype(np.float32))
+        windows = len(frames)
+        under = ClipGround(*(np.broadcast_to(a, (windows, *a.shape)) for a in (floor.floor, floor.above_sole)),
+                           floor.contact[frames], np.broadcast_to(floor.known, (windows,)))
         return jax.device_get(fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
-                                  directions[frames], weight[frames], found, fit_betas=betas is None, config=config))
+                                  directions[frames], weight[frames], found, under, fit_betas=betas is None,
+                                  config=config))
 
     def in_windows(fit, betas, keep=lambda result, frames: result, told=lambda frames: None):
         """What ``keep`` takes of ``fit``'s results and the window's frames (frames leading) over the track, window
@@ -322,10 +334,13 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
                 told(int(core[w].sum()))
         return jax.tree.map(lambda *a: np.concatenate(a), *parts)
 
-    frames, found = shape_frames(valid, bool(fps))
-    shaped = solve(_fit, frames[None], found[None], fps or 0.0)  # one shape, fitted on `shape_frames`
-    shape = np.asarray(shaped.params.betas[0, 0])
-    if fps:  # each limb's depth chosen over the whole track (`clip_start`)
+    if ground is not None:  # refitted on the floor from a fit: its shape, its poses
+        shape, shaped_converged = np.asarray(start.betas[np.argmax(valid)]), True
+    else:  # one shape, fitted on `shape_frames`
+        frames, found = shape_frames(valid, bool(fps))
+        shaped = solve(_fit, frames[None], found[None], fps or 0.0)
+        shape, shaped_converged = np.asarray(shaped.params.betas[0, 0]), bool(shaped.converged[0])
+    if fps and ground is None:  # each limb's depth chosen over the whole track (`clip_start`)
         unary, triple, hypotheses = in_windows(_hypotheses, shape)
         codes = _limb_codes(unary, triple)
         pose = np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(start))[:, list(SOLVED_JOINTS)]
@@ -338,5 +353,4 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
 
     params, (scale, trans), converged = in_windows(_fit, shape, with_cameras, progress or (lambda frames: None))
     finite = np.all(np.isfinite(np.asarray(jax.vmap(smplx_jax.SMPLXParams.full_pose)(params))), (1, 2))
-    return FittedClip(Bodies(params, scale, trans, valid & finite),
-                      converged & bool(shaped.converged[0]))
+    return FittedClip(Bodies(params, scale, trans, valid & finite), converged & shaped_converged)
