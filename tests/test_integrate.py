@@ -26,6 +26,7 @@ from jaxmocap.integrate import (
     smooth_rotvecs,
     synthetic,
 )
+from jaxmocap.integrate.motion_arrays import body_joints
 from jaxmocap.pipeline.fit_folder import infer_image_size
 from params_util import random_params
 from smplx_jax import constants, rotations
@@ -151,14 +152,14 @@ def test_a_pinhole_fit_recovers_a_near_body_and_its_place(model):
     err = np.asarray(pinhole.reprojection_error_px)
     assert np.median(err) <= 0.5, np.median(err)
     def skeleton(params):  # the 22 body joints about the body origin
-        return np.asarray(synthetic._JOINTS(model, params.replace(transl=0 * params.transl)))[:, :22]
+        return body_joints(model, params.replace(transl=0 * params.transl))[:, :22]
 
     truth_3d = skeleton(near.truth)
     ours, theirs = (np.median(np.linalg.norm(skeleton(r.params) - truth_3d, axis=-1)) for r in (pinhole, weak))
     assert ours < 0.7 * theirs, (ours, theirs)
     depth, truth = np.asarray(pinhole.params.transl[:, 2]), np.asarray(near.truth.transl[:, 2])
     assert np.median(np.abs(depth / truth - 1)) <= 0.1 and np.all((depth > 1.5) & (depth < 4.5))
-    joints = synthetic._JOINTS(model, pinhole.params)[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
+    joints = body_joints(model, pinhole.params)[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
     # the stored weak perspective is the closest one: nearer than the one at the body origin's depth
     seen = near.keypoints[..., 2] > 0
     pixels = 900.0 * joints[..., :2] / joints[..., 2:] + centre

@@ -85,7 +85,7 @@ def make_problem(model: BodyModel, t: int, seed: int = 0, noise_px: float = 2.0,
     else:
         truth = truth.replace(transl=jnp.asarray(np.concatenate([(trans - centre) / scale[:, None],
                                                                  focal_length / scale[:, None]], 1)))
-        joints = np.asarray(_JOINTS(model, truth))[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
+        joints = body_joints(model, truth)[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
         clean = focal_length * joints[..., :2] / joints[..., 2:] + centre
     keypoints = np.concatenate([clean + rng.normal(0, noise_px, clean.shape), np.ones(clean.shape[:2] + (1,))], -1)
     keypoints[rng.uniform(size=clean.shape[:2]) < drop] = 0.0
