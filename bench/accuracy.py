@@ -24,7 +24,10 @@ alignment-free), acceleration error (mm/frame^2, second differences of the align
 over three consecutive scored frames); for the motion: frames valid, median and > 40 px share of the 2D
 reprojection error, the frame-to-frame change of the stored rotations (global and body joints, at 60 fps), and the
 share of finger joints bent backwards by more than 10 degrees; the share of frames whose global orientation turns by
-more than 45 degrees; the number of identities the run gave the one person.
+more than 45 degrees; the number of identities the run gave the one person. The world frame (motion.npz's world
+keys; not of ``pan``, whose camera turns): the floor's normal against the room's up (the calibration), WA-MPJPE of
+the world joints, while a reference ankle stands still our ankle's movement per frame beside the reference's own,
+the heel and toe frames in contact and those of them within 2 cm of the floor, the lowest sole.
 """
 
 from __future__ import annotations
@@ -250,16 +253,16 @@ def body_joints_of(motion: dict) -> np.ndarray:
     return np.where(np.asarray(motion["valid"])[:, None, None], joints, np.nan)
 
 
-def still_frames(ankles: np.ndarray, fps: float, still_m_s: float | None = None) -> np.ndarray:
-    """``(T, 2)`` where each of the reference's ankles ``(T, 2, 3)`` stands still: slower than ``still_m_s``
-    (default `ground.REST_SPEED_M_S`, the run's own rule: far below a step's speed, above what the reference's
-    1-2 cm of noise gives over the window) over `ground.SPEED_WINDOW_S` about the frame."""
+def still_frames(ankles: np.ndarray, fps: float) -> np.ndarray:
+    """``(T, 2)`` where each of the reference's ankles ``(T, 2, 3)`` stands still: slower than
+    `ground.REST_SPEED_M_S` (the run's own rule: far below a step's speed, above what the reference's 1-2 cm of
+    noise gives over the window) over `ground.SPEED_WINDOW_S` about the frame."""
     from jaxmocap.integrate.ground import REST_SPEED_M_S, SPEED_WINDOW_S
 
     half = max(1, round(SPEED_WINDOW_S * fps / 2))
     speed = np.full(ankles.shape[:2], np.inf)
     speed[half:-half] = np.linalg.norm(ankles[2 * half:] - ankles[:-2 * half], axis=-1) * fps / (2 * half)
-    return np.nan_to_num(speed, nan=np.inf) < (REST_SPEED_M_S if still_m_s is None else still_m_s)
+    return np.nan_to_num(speed, nan=np.inf) < REST_SPEED_M_S
 
 
 def world_scores(motion: dict, reference: np.ndarray) -> dict:
@@ -268,7 +271,8 @@ def world_scores(motion: dict, reference: np.ndarray) -> dict:
     reference's own there (``sliding_ratio``; both in mm per frame); the share of heel and toe frames in contact
     whose sole is within `CONTACT_TOLERANCE_M` of the floor and the lowest sole of any valid frame (cm)."""
     if "world_transl" not in motion:
-        return dict(world_wa_mpjpe_mm=None, sliding_ratio=None, contact_on_floor=None, lowest_sole_cm=None)
+        return dict(world_wa_mpjpe_mm=None, sliding_ratio=None, still_ankle_mm=None, reference_still_mm=None,
+                    contact_on_floor=None, lowest_sole_cm=None)
     import smplx_jax
     from jaxmocap.integrate.ground import FOOT_JOINTS, sole_heights
 
@@ -505,7 +509,7 @@ def main():
             r = rows["motion"]
             if r.get("world_wa_mpjpe_mm") is None or r["floor_angle_deg"] is None:  # (pan: a moving camera)
                 continue
-            floor = "-" if r["floor_angle_deg"] is None else f"{r['floor_angle_deg']:.1f}°"
+            floor = f"{r['floor_angle_deg']:.1f}°"
             on_floor = "-" if r["contact_on_floor"] is None else f"{100 * r['contact_on_floor']:.0f}%"
             print(f"{'':>12} {name:>14} {model:>6} {floor:>6} {r['world_wa_mpjpe_mm']:>8.0f} "
                   f"{r['still_ankle_mm']:>14.1f} {r['reference_still_mm']:>6.1f} {r['sliding_ratio']:>5.2f} "

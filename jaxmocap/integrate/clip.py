@@ -90,8 +90,8 @@ class ClipConfig:
     # metres: a sole carrying weight off the floor's plane (the floor's unevenness, a shoe's sole pressed, the heel's
     # or toe's point on the sole shifting as the foot rolls), and how far a heel or toe sinks through it
     contact_height_sigma_m: float = 0.01
-    # m/s: a heel or toe carrying weight rolls on the floor but does not slide (the reference's planted markers
-    # jitter by a few millimetres a frame, a fifth of a metre per second at 60 frames/s: no foot's true speed)
+    # m/s: a heel or toe carrying weight does not slide; it moves by a few centimetres a second as the foot rolls
+    # over it (where it lifts, the contact ends)
     planted_speed_sigma: float = 0.05
     # converged when the decrease the model predicts to the optimum is below this per frame, in the cost's units
     # (half a squared standard error, i.e. the negative log-likelihood): then every frame is within
@@ -286,7 +286,7 @@ def contact_weights(data: ClipData) -> tuple[Float[Array, "T 4"], Float[Array, "
     return touching, free, planted
 
 
-def sole_heights(x: Float[Array, "T 67 3"], ground: ClipGround) -> Float[Array, "T 4"]:
+def heights_above_floor(x: Float[Array, "T 67 3"], ground: ClipGround) -> Float[Array, "T 4"]:
     """How far each of `FOOT_KEYPOINTS`' soles is above the floor (metres; negative below it), the foot flat."""
     return x[:, FOOT_KEYPOINTS] @ ground.floor[:3] + ground.floor[3] - ground.above_sole
 
@@ -297,7 +297,7 @@ def ground_residuals(x: Float[Array, "T 67 3"], data: ClipData, config: ClipConf
     depth below the floor elsewhere, its velocity (to the next frame, m/s) where it is planted, each over its
     sigma."""
     touching, free, planted = contact_weights(data)
-    height = sole_heights(x, data.ground) / config.contact_height_sigma_m
+    height = heights_above_floor(x, data.ground) / config.contact_height_sigma_m
     feet = x[:, FOOT_KEYPOINTS]
     velocity = jnp.concatenate([feet[1:] - feet[:-1], jnp.zeros_like(feet[:1])]) * data.fps
     return (touching * height, free * jax.nn.relu(-height),
@@ -469,7 +469,7 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     # the ground's: a sole's height along the floor's normal, where it touches or sinks; a planted foot's velocity
     touching, free, planted = contact_weights(data)
     normal = data.ground.floor[:3]
-    across_floor = (touching + free * (sole_heights(x, data.ground) < 0)) / config.contact_height_sigma_m**2
+    across_floor = (touching + free * (heights_above_floor(x, data.ground) < 0)) / config.contact_height_sigma_m**2
     still = (data.fps / config.planted_speed_sigma) ** 2
     rolling = still * (planted + jnp.concatenate([jnp.zeros_like(planted[:1]), planted[:-1]]))
     motion = motion.at[:, FOOT_KEYPOINTS].add(across_floor[..., None, None] * jnp.outer(normal, normal)

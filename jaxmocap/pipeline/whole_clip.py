@@ -304,7 +304,7 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
         direction_weight = np.zeros((count, len(BONES)), np.float32)
     directions, weight = np.asarray(directions, np.float32), np.asarray(direction_weight, np.float32)
     focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
-    floor = jax.tree.map(lambda a: np.asarray(a, np.float32), ClipGround.none(count) if ground is None else ground)
+    on = jax.tree.map(lambda a: np.asarray(a, np.float32), ClipGround.none(count) if ground is None else ground)
 
     def solve(fit, frames, found, rate, betas=None):
         """Windows of frames ``frames`` ``(W, F)`` (indices, padded with repeats), each as one clip, the shape
@@ -313,8 +313,8 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
         if betas is not None:
             pick = pick.replace(betas=np.broadcast_to(betas, pick.betas.shape).astype(np.float32))
         windows = len(frames)
-        under = ClipGround(*(np.broadcast_to(a, (windows, *a.shape)) for a in (floor.floor, floor.above_sole)),
-                           floor.contact[frames], np.broadcast_to(floor.known, (windows,)))
+        under = ClipGround(*(np.broadcast_to(a, (windows, *a.shape)) for a in (on.floor, on.above_sole)),
+                           on.contact[frames], np.broadcast_to(on.known, (windows,)))
         return jax.device_get(fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
                                   directions[frames], weight[frames], found, under, fit_betas=betas is None,
                                   config=config))
