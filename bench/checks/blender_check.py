@@ -82,7 +82,8 @@ def _lowest(armatures) -> float | None:
     """Blender's z of the lowest point at the scene's frame: of the evaluated (skinned) meshes' vertices where there
     are meshes, else of the armatures' posed bones' heads and tails."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    meshes = [o.evaluated_get(depsgraph) for o in bpy.data.objects if o.type == "MESH" and len(o.data.vertices) > 100]
+    meshes = [o.evaluated_get(depsgraph) for o in bpy.data.objects  # not the glTF importer's bone-shape spheres
+              if o.type == "MESH" and len(o.data.vertices) > 100]
     if meshes:
         return round(min(min((o.matrix_world @ v.co).z for v in o.to_mesh().vertices) for o in meshes), 4)
     points = [(a.matrix_world @ p).z for a in armatures for b in a.pose.bones for p in (b.head, b.tail)]
