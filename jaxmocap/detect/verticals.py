@@ -189,7 +189,7 @@ def scene_vertical(segments: Segments, focal_length: float, principal_point, nea
     start = int(np.searchsorted(grid, focal_length))
     every, best, chosen = np.ones(len(segments.lengths), bool), 0.0, None
     for vertical in found:
-        for side in (grid[start:], grid[:start][::-1]) if not fixed else (grid,):
+        for side in (grid[start:], grid[:start][::-1]):
             direction = vertical
             for candidate in side:
                 direction = _refined(segments, every, (candidate, principal_point), direction)

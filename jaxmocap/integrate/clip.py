@@ -53,6 +53,7 @@ from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.integrate.keypoints import KeypointModel, params_of
 from jaxmocap.integrate.least_squares import BEND_LIMITS, FINGER_JOINTS, bend_of, log1p_ratio
 from smplx_jax import BodyModel, SMPLXParams
+from smplx_jax.constants import BODY25_FROM_SMPLX
 from smplx_jax.rotations import quat_product, quat_to_rotvec, rotvec_to_quat
 
 SOLVED_JOINTS = tuple(j for j in range(55) if j not in (22, 23, 24))  # all but the jaw and the eyes
@@ -107,8 +108,8 @@ class ClipUnknowns(NamedTuple):
     betas: Float[Array, "B"]
 
 
-FOOT_KEYPOINTS = (21, 19, 24, 22)  # left heel, left big toe, right heel, right big toe (BODY_25 of SMPL-X's 62, 60,
-# 65, 63: `integrate.ground.FOOT_JOINTS`)
+FOOT_JOINTS = (62, 60, 65, 63)  # left heel, left big toe, right heel, right big toe (SMPL-X's vertex joints)
+FOOT_KEYPOINTS = tuple(BODY25_FROM_SMPLX.index(joint) for joint in FOOT_JOINTS)  # the same of BODY_25
 
 
 class ClipGround(NamedTuple):
@@ -125,6 +126,7 @@ class ClipGround(NamedTuple):
 
     @classmethod
     def none(cls, frames: int, dtype=jnp.float32) -> "ClipGround":
+        """No floor (``known`` 0) over ``frames`` frames."""
         return cls(jnp.zeros(4, dtype), jnp.zeros(4, dtype), jnp.zeros((frames, 4), dtype), jnp.zeros((), dtype))
 
 

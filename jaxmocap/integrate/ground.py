@@ -20,10 +20,9 @@ import numpy as np
 from jaxtyping import Bool, Float
 
 import smplx_jax
-from jaxmocap.integrate.clip import ClipGround
+from jaxmocap.integrate.clip import FOOT_JOINTS, ClipGround
 from jaxmocap.integrate.motion_arrays import body_joints
 
-FOOT_JOINTS = (62, 60, 65, 63)  # left heel, left big toe, right heel, right big toe (SMPL-X's vertex joints)
 PELVIS, NECK = 0, 12
 # A stepping foot moves at 1-4 m/s and one carrying weight not at all: below this speed a heel or toe may carry
 # weight. Its speed is its displacement over `SPEED_WINDOW_S`, long enough to average out a fit's frame-to-frame
