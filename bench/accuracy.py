@@ -25,9 +25,10 @@ over three consecutive scored frames); for the motion: frames valid, median and 
 reprojection error, the frame-to-frame change of the stored rotations (global and body joints, at 60 fps), and the
 share of finger joints bent backwards by more than 10 degrees; the share of frames whose global orientation turns by
 more than 45 degrees; the number of identities the run gave the one person. The world frame (motion.npz's world
-keys; not of ``pan``, whose camera turns): the floor's normal against the room's up (the calibration), WA-MPJPE of
-the world joints, while a reference ankle stands still our ankle's movement per frame beside the reference's own,
-the heel and toe frames in contact and those of them within 2 cm of the floor, the lowest sole.
+keys): the floor's normal against the room's up (the calibration; ``pan``: seen from its first window), WA-MPJPE
+of the world joints, while a reference ankle stands still our ankle's movement per frame beside the reference's own,
+the heel and toe frames in contact and those of them within 2 cm of the floor, the lowest sole. ``pan`` is also run
+with ``--camera static``: the world motion of each run against the static view's (`panning_scores`).
 """
 
 from __future__ import annotations
@@ -207,12 +208,18 @@ def room_up(view: str, path=CALIBRATION) -> np.ndarray:
     return world_to_camera[:, 2]
 
 
-def variant_up(up: np.ndarray, kind: str | None) -> np.ndarray | None:
-    """The room's up seen by a variant's camera: mirrored (x negated) or turned about the optical axis as its
-    frames were (``rotate90``: clockwise; ``roll``: OpenCV's counter-clockwise degrees); None for ``pan`` (a
-    moving camera has no one floor yet)."""
+def variant_up(up: np.ndarray, kind: str | None, size: tuple[int, int]) -> np.ndarray:
+    """The room's up seen by a variant's camera (its first frame's, for ``pan``), of a view of ``size`` (width,
+    height): mirrored (x negated), turned about the optical axis as its frames were (``rotate90``: clockwise;
+    ``roll``: OpenCV's counter-clockwise degrees), or, for ``pan``, turned about the vertical axis to look through
+    the first window's centre (through the run's focal length)."""
+    from jaxmocap.integrate.camera import default_focal_length
+
     if kind == "pan":
-        return None
+        window = (int(PAN_WIDTH * size[0]), size[1])
+        aside = np.arctan2(window[0] / 2 - size[0] / 2, default_focal_length(window))
+        cos, sin = np.cos(aside), np.sin(aside)
+        return np.array([[cos, 0.0, sin], [0.0, 1.0, 0.0], [-sin, 0.0, cos]]).T @ up
     if kind == "mirror":
         return up * np.array([-1.0, 1.0, 1.0])
     angle = -np.pi / 2 if kind == "rotate90" else np.radians(float(kind[4:])) if kind and kind.startswith("roll") \
@@ -298,6 +305,30 @@ def world_scores(motion: dict, reference: np.ndarray) -> dict:
                 lowest_sole_cm=float(100 * np.min(soles[valid])) if valid.any() else None)
 
 
+def panning_scores(turning: dict, held: dict, static: dict) -> dict:
+    """A panning camera's world motion against the static view's: WA-MPJPE (mm, one similarity over the clip) of
+    the limb joints in the world frame, of the run that measured the camera's turns (``turning``) and of the same
+    clip held still (``held``, ``--camera static``), over the frames valid in both; and how far the camera turned
+    (degrees, the largest turn from the first frame)."""
+    reference = world_joints(static)[:, SMPLX_LIMB_JOINTS]
+
+    def against(motion):
+        joints = world_joints(motion)[:, SMPLX_LIMB_JOINTS]
+        return whole_clip_error_mm(joints, reference, np.all(np.isfinite(joints) & np.isfinite(reference), -1))
+
+    turns = np.asarray(turning["camera_from_world"][:, :3, :3], np.float64)
+    cos = (np.trace(np.swapaxes(turns[:1], 1, 2) @ turns, axis1=1, axis2=2) - 1) / 2
+    return dict(turned_deg=float(np.degrees(np.arccos(np.clip(cos, -1, 1)).max())),
+                world_vs_static_mm=against(turning), held_still_vs_static_mm=against(held))
+
+
+def video_size(video: Path) -> tuple[int, int]:
+    """``(width, height)`` of a video's frames."""
+    from jaxmocap.frame_source import open_media
+
+    return tuple(open_media(video, 0, 1, 1)[0].size)
+
+
 def fingers_bent_backwards(motion: dict, tolerance_deg: float = 10.0) -> float:
     """The share of finger joint-frames (index to ring, both hands, valid frames) bent backwards, against their
     flexion, by more than ``tolerance_deg``."""
@@ -320,9 +351,9 @@ class Stages:
 
 
 def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str = "heavy",
-               chunk_size: int | None = None) -> Stages:
-    """``jaxmocap run`` on ``video`` (frames up to ``end``, ``chunk_size`` frames a chunk or the run's default; its
-    motion.npz), and the stages before the clip fit from what the run itself observed, chunk by chunk (`run`'s
+               chunk_size: int | None = None, camera: str = "turns") -> Stages:
+    """``jaxmocap run`` on ``video`` (frames up to ``end``, ``chunk_size`` frames a chunk or the run's default,
+    ``--camera camera``; its motion.npz), and the stages before the clip fit from what the run itself observed, chunk by chunk (`run`'s
     ``observed``): BlazePose's world landmarks (left and right put back where the detector exchanged them, as the
     fit takes them) and the fit's start. The take has one person: each frame's is the lowest id found."""
     import jax
@@ -345,7 +376,7 @@ def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str =
         chunks.append(part)
 
     chunking = {} if chunk_size is None else {"chunk_size": chunk_size}
-    run(RunConfig(video, end=end, overlay=False, progress=False, landmarks=landmarks, **chunking), work,
+    run(RunConfig(video, end=end, overlay=False, progress=False, landmarks=landmarks, camera=camera, **chunking), work,
         observed=observed)
     motion = read_motion(work / "motion.npz")
     blazepose, track = jax.tree.map(lambda *a: np.concatenate(a), *chunks)
@@ -463,6 +494,8 @@ def main():
     reference = load_reference()
     results = {model: {} for model in args.landmarks}
     motions, per_frame, person_x = {}, {}, {}
+    statics = {model: {} for model in args.landmarks}
+    sizes = {view: video_size(video) for view, video in views.items()}
     for view, video in views.items():
         for kind in (None, *variants):
             name = view if kind is None else f"{view}/{kind}"
@@ -473,9 +506,15 @@ def main():
                     source = video if kind is None else write_variant(video, kind, work / "variant.mp4",
                                                                       person_x[view])
                     stages = run_stages(source, work / "run", landmarks=model, chunk_size=args.chunk)
+                    held = run_stages(source, work / "held", landmarks=model, chunk_size=args.chunk,
+                                      camera="static") if kind == "pan" else None
                 results[model][name] = report_view(name, stages, variant_reference(reference, kind),
-                                                   variant_up(room_up(view), kind)) | {
+                                                   variant_up(room_up(view), kind, sizes[view])) | {
                     "seconds": time.perf_counter() - begin}
+                if held is not None:  # the panning camera's world motion against the static view's
+                    results[model][name]["panning"] = panning_scores(stages.motion, held.motion, statics[model][view])
+                if kind is None:
+                    statics[model][view] = stages.motion
                 print(f"{name} [{model}]: {time.perf_counter() - begin:.0f} s", flush=True)
                 if kind is None and model == args.landmarks[0]:
                     motions[name] = stages.motion
@@ -507,13 +546,21 @@ def main():
     for model, cases in results.items():
         for name, rows in cases.items():
             r = rows["motion"]
-            if r.get("world_wa_mpjpe_mm") is None or r["floor_angle_deg"] is None:  # (pan: a moving camera)
+            if r.get("world_wa_mpjpe_mm") is None:
                 continue
             floor = f"{r['floor_angle_deg']:.1f}°"
             on_floor = "-" if r["contact_on_floor"] is None else f"{100 * r['contact_on_floor']:.0f}%"
             print(f"{'':>12} {name:>14} {model:>6} {floor:>6} {r['world_wa_mpjpe_mm']:>8.0f} "
                   f"{r['still_ankle_mm']:>14.1f} {r['reference_still_mm']:>6.1f} {r['sliding_ratio']:>5.2f} "
                   f"{100 * r['contact_share']:>6.0f}% {on_floor:>8} {r['lowest_sole_cm']:>9.1f}cm")
+    print(f"\npanning camera: {'case':>14} {'model':>6} {'turned':>7} {'world vs static view mm':>23} "
+          f"{'held still: mm':>14}")
+    for model, cases in results.items():
+        for name, rows in cases.items():
+            if "panning" in rows:
+                r = rows["panning"]
+                print(f"{'':>15} {name:>14} {model:>6} {r['turned_deg']:>6.1f}° {r['world_vs_static_mm']:>23.0f} "
+                      f"{r['held_still_vs_static_mm']:>14.0f}")
     print()
     print("\n".join(side_by_side(results)))
     args.out.mkdir(parents=True, exist_ok=True)

@@ -52,6 +52,8 @@ def _print_report(report, hands: bool = False):
         folders.setdefault(Path(path).parent, []).append(path)
     for folder, paths in folders.items():
         print(f"wrote {len(paths)} files in {folder}/" if len(paths) > 3 else "\n".join(f"wrote {p}" for p in paths))
+    if report.camera:
+        print(report.camera)
     if len(report.people) > 1:
         print(f"{len(report.people)} {'hands' if hands else 'people'} tracked: {', '.join(map(str, report.people))}")
 
@@ -64,7 +66,7 @@ def _run_config(args, source):
         source, mode=args.mode, model=args.model, weights=args.weights, integration=args.integration,
         hand_boxes=args.hand_boxes, keypoints=args.keypoints, max_people=args.max_people, max_hands=args.max_hands,
         landmarks=args.landmarks, start=args.start, end=args.end, stride=args.stride, chunk_size=args.chunk,
-        iterations=args.iterations, focal_length=args.focal_length, smooth=not args.no_smooth,
+        iterations=args.iterations, focal_length=args.focal_length, camera=args.camera, smooth=not args.no_smooth,
         overlay=not args.no_overlay, exports=tuple(f for f in args.export.split(",") if f),
         frankmocap_pkl=args.frankmocap_pkl, save_frames=args.save_frames, progress=not args.quiet)
 
@@ -215,6 +217,9 @@ def _run_options(p) -> None:
     p.add_argument("--iterations", type=int, default=20, help="fit iterations (default: %(default)s)")
     p.add_argument("--focal-length", type=float, default=None, metavar="PX",
                    help="the camera's focal length in pixels (default: a phone's main camera, 0.75 x the long side)")
+    p.add_argument("--camera", choices=("turns", "static"), default="turns",
+                   help="turns: a video camera's turns (panning, tilting, handheld) measured from the background, "
+                        "the world frame held still through them; static: a camera held still (default: %(default)s)")
     p.add_argument("--chunk", type=int, default=128, help="frames per resumable chunk (default: %(default)s)")
     p.add_argument("--no-smooth", action="store_true",
                    help="no motion between frames: each fitted as an unrelated image (--mode hands: no smoothing)")

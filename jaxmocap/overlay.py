@@ -147,13 +147,12 @@ class OverlayWriter:
 
     def __init__(self, path: Path, frame_size: tuple[int, int], fps: float, faces: np.ndarray,
                  max_height: int = 960, lens: tuple = (None, None), up: np.ndarray | None = None,
-                 spread: float = 0.0, floor: np.ndarray | None = None):
+                 spread: float = 0.0):
         width, height = frame_size
         self.spread = spread  # metres between the people, at most: the side view's scale leaves room for it
         self.faces = np.asarray(faces)
         self.lens = lens  # (focal_length, principal_point) of a pinhole camera, or (None, None)
         self.up = up  # the side view's vertical in the camera frame (`body_up`)
-        self.floor = floor  # motion.npz's floor, or None (`side_view`)
         self.scale = min(1.0, max_height / height)
         self.panel = (int(round(width * self.scale)), int(round(height * self.scale)))
         self.path = Path(path)
@@ -164,9 +163,9 @@ class OverlayWriter:
         self.pixels_per_metre = None
         self.pool = ThreadPoolExecutor(os.cpu_count() or 1)
 
-    def compose(self, frame: np.ndarray, people: list[Posed] = ()) -> np.ndarray:
+    def compose(self, frame: np.ndarray, people: list[Posed] = (), floor: np.ndarray | None = None) -> np.ndarray:
         """One output image: the frame with the people drawn over it beside the side view (empty without
-        anyone)."""
+        anyone), the ``floor`` under them (`side_view`)."""
         left = people_over_frame(frame, list(people), self.faces, self.scale, *self.lens)
         if left.shape[1::-1] != self.panel:
             left = cv2.resize(left, self.panel, interpolation=cv2.INTER_AREA)
@@ -178,11 +177,12 @@ class OverlayWriter:
             tallest = max(float((p.vertices.max(axis=0) - p.vertices.min(axis=0)).max()) for p in people)
             self.pixels_per_metre = 0.75 * self.panel[1] / (tallest + self.spread)
         right = side_view(list(people), self.faces, self.panel, self.pixels_per_metre, (lo + hi) / 2, up=self.up,
-                          floor=self.floor)
+                          floor=floor)
         return np.concatenate([left, right], axis=1)
 
-    def write(self, *frames: tuple[np.ndarray, list[Posed]]) -> None:
-        """Frames in order, each ``(frame, people)``, composed in parallel threads."""
+    def write(self, *frames: tuple) -> None:
+        """Frames in order, each ``(frame, people)`` or ``(frame, people, floor)`` (`compose`), composed in parallel
+        threads."""
         first = next((f for f in frames if len(f[1])), None)
         if first is not None and self.pixels_per_metre is None:
             self.compose(*first)  # fixes the side view's scale before the threads share it

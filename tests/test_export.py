@@ -63,26 +63,27 @@ def test_animation_matches_the_posed_skeleton(case):
 
 
 def test_the_world_frame_animation_is_the_body_in_the_world(case):
-    """A motion with world keys is exported as SMPL-X puts its body in the world frame (y up, the floor y = 0);
-    ``frame="camera"`` keeps the camera's frame turned y up, as a motion without them."""
+    """A motion with world keys is exported as SMPL-X puts its body in the world frame (y up, the floor y = 0), seen
+    from a camera that turns from frame to frame; ``frame="camera"`` keeps the camera's frame turned y up, as a
+    motion without them."""
     from jaxmocap.integrate.ground import world_pose
 
     model, params, motion = case
     pinhole = motion | {"focal_length": np.asarray(FOCAL), "principal_point": np.asarray(SIZE) / 2,
                         "transl": np.tile([0.2, -0.1, 3.0], (T, 1))}
-    camera_from_world = np.eye(4)
-    camera_from_world[:3, :3] = np.asarray(rotvec_to_rotmat(np.array([np.pi + 0.4, 0.2, 0.1])))
-    camera_from_world[:3, 3] = [0.1, 1.2, 4.0]
+    camera_from_world = np.repeat(np.eye(4)[None], T, 0)
+    turning = np.array([0.0, 0.05, 0.01]) * np.arange(T)[:, None]  # a camera panning and rolling
+    camera_from_world[:, :3, :3] = np.asarray(rotvec_to_rotmat(np.array([np.pi + 0.4, 0.2, 0.1]) + turning))
+    camera_from_world[:, :3, 3] = [0.1, 1.2, 4.0]
     camera = jax.vmap(smplx_jax.posed_skeleton, in_axes=(None, 0))(model, params.replace(
         transl=pinhole["transl"].astype(np.float32)))
     orient, transl = world_pose(pinhole["global_orient"], pinhole["transl"], np.asarray(camera.joints[:, 0]),
                                 camera_from_world)
-    world = pinhole | {"world_global_orient": orient, "world_transl": transl,
-                       "camera_from_world": np.repeat(camera_from_world[None], T, 0),
+    world = pinhole | {"world_global_orient": orient, "world_transl": transl, "camera_from_world": camera_from_world,
                        "floor": np.zeros(4), "contact": np.zeros((T, 4), bool)}
     _, positions = global_transforms(animation(model, world))
-    rotation, t = camera_from_world[:3, :3], camera_from_world[:3, 3]
     for frame in (0, 5, T - 1):
+        rotation, t = camera_from_world[frame, :3, :3], camera_from_world[frame, :3, 3]
         np.testing.assert_allclose(positions[frame], (np.asarray(camera.joints[frame]) - t) @ rotation, atol=1e-5)
     _, in_camera = global_transforms(animation(model, world, frame="camera"))
     _, as_before = global_transforms(animation(model, pinhole))

@@ -142,3 +142,35 @@ def test_a_motion_has_every_world_key_or_none(tmp_path):
         write_motion(tmp_path / "motion.npz", motion | {k: v for k, v in world.items() if k != "world_transl"})
     with pytest.raises(InputError, match="'contact' has shape"):
         write_motion(tmp_path / "motion.npz", motion | world | {"contact": np.zeros((frames, 2), bool)})
+
+
+def test_a_turning_camera_sees_the_same_world(model):
+    """The stepping body seen by a camera that pans and tilts about its centre (up to 20 degrees, each frame's turn
+    given, `ground.standing`'s ``scene_from_camera``): the same floor, contacts and world body as from the camera
+    held still; each frame's ``camera_from_world`` turned with it."""
+    rotation, t = _camera_from_world(25.0, 8.0)
+    params, still = stepping(model, rotation, t)
+    frames = len(still)
+    turns = np.radians(np.stack([10 * np.sin(np.linspace(0, 3, frames)), np.linspace(0, 20, frames),
+                                 np.zeros(frames)], 1))
+    scene_from_camera = np.asarray(rotations.rotvec_to_rotmat(turns), np.float64)
+    pelvis = np.asarray(smplx_jax.forward_joints(model, smplx_jax.SMPLXParams.zeros(model.num_betas,
+                                                                                     model.num_expression)))[0]
+    root = np.asarray(rotations.rotvec_to_rotmat(params.global_orient), np.float64)
+    seen = dataclasses.replace(
+        params, global_orient=np.asarray(rotations.rotmat_to_rotvec(np.swapaxes(scene_from_camera, 1, 2) @ root),
+                                         np.float32),
+        transl=(np.einsum("tji,tj->ti", scene_from_camera, params.transl + pelvis) - pelvis).astype(np.float32))
+    valid = np.ones(frames, bool)
+    held = world_keys(model, params, valid)
+    people = {0: (seen, valid)}
+    turning = ground.world_arrays(model, people, 0, ground.standing(model, people, FPS, scene_from_camera=turns),
+                                  turns)[0]
+    np.testing.assert_allclose(turning["floor"], held["floor"], atol=1e-4)
+    assert np.mean(turning["contact"] == held["contact"]) > 0.99
+    np.testing.assert_allclose(body_joints(model, dataclasses.replace(seen, global_orient=turning["world_global_orient"],
+                                                                      transl=turning["world_transl"])),
+                               body_joints(model, dataclasses.replace(params, global_orient=held["world_global_orient"],
+                                                                      transl=held["world_transl"])), atol=1e-3)
+    np.testing.assert_allclose(turning["camera_from_world"][:, :3, :3],
+                               np.swapaxes(scene_from_camera, 1, 2) @ held["camera_from_world"][:, :3, :3], atol=1e-5)

@@ -22,9 +22,13 @@ squared normalised errors whose balance holds for any video:
   ``angular_acceleration_sigma`` (a twist the keypoints hardly see turns smoothly too); a frame's acceleration is
   expected within them at any frame rate;
 * the shape: ``betas`` over one standard deviation of the population (the model's shape space is whitened);
-* the ground, where a floor is known (`ClipGround`, the camera's frame; a static camera): a heel or toe carrying
-  weight touches the floor (its sole's height over ``contact_height_sigma_m``) and does not move (its velocity, in
-  m/s over ``planted_speed_sigma``); no heel or toe sinks below it (the depth below, over the same sigma).
+* the ground, where a floor is known (`ClipGround`, the scene's frame): a heel or toe carrying weight touches the
+  floor (its sole's height over ``contact_height_sigma_m``) and does not move (its velocity, in m/s over
+  ``planted_speed_sigma``); no heel or toe sinks below it (the depth below, over the same sigma).
+
+The motion and the ground are the scene's: a camera that turns (``scene_from_camera``, each frame's rotation from
+its camera's axes to the scene's, the axes of a camera that does not turn; zero for a static camera) turns about
+its own centre, so a point ``X`` of the camera's frame is ``R X`` in the scene's, and the body's orientation ``R G``.
 
 Frames where the person is not ``found`` hold their start and weigh nothing. Solved by `ClipLevenbergMarquardt`
 (an `optimistix` least-squares solver, matrix-free: conjugate gradients on the damped Gauss-Newton system of the
@@ -54,7 +58,7 @@ from jaxmocap.integrate.keypoints import KeypointModel, params_of
 from jaxmocap.integrate.least_squares import BEND_LIMITS, FINGER_JOINTS, bend_of, log1p_ratio
 from smplx_jax import BodyModel, SMPLXParams
 from smplx_jax.constants import BODY25_FROM_SMPLX
-from smplx_jax.rotations import quat_product, quat_to_rotvec, rotvec_to_quat
+from smplx_jax.rotations import quat_product, quat_to_rotvec, rotvec_to_quat, rotvec_to_rotmat
 
 SOLVED_JOINTS = tuple(j for j in range(55) if j not in (22, 23, 24))  # all but the jaw and the eyes
 FIXED_JOINTS = (22, 23, 24)
@@ -114,7 +118,7 @@ FOOT_KEYPOINTS = tuple(BODY25_FROM_SMPLX.index(joint) for joint in FOOT_JOINTS) 
 
 class ClipGround(NamedTuple):
     """The floor of a clip fit and which feet carry weight on it (all arrays: one compiled solver serves clips with
-    and without one): ``floor (4,)`` the plane ``n · X + d = 0`` in the camera's frame (``(nx, ny, nz, d)``, ``n``
+    and without one): ``floor (4,)`` the plane ``n · X + d = 0`` in the scene's frame (``(nx, ny, nz, d)``, ``n``
     the unit up direction), ``above_sole (4,)`` each of `FOOT_KEYPOINTS`' height above its sole with the foot flat
     (metres), ``contact (T, 4)`` 1 where that heel or toe carries weight, ``known`` 1 where there is a floor (0: no
     ground residual)."""
@@ -148,6 +152,7 @@ class ClipData(NamedTuple):
     fps: Float[Array, ""]
     fit_betas: Float[Array, ""]  # 1: the shape is solved for; 0: it holds the start's
     ground: ClipGround
+    scene_from_camera: Float[Array, "T 3"]  # axis-angles: each frame's camera axes turned into the scene's
 
 
 class ClipResiduals(NamedTuple):
@@ -273,7 +278,7 @@ def residuals(y: ClipUnknowns, data: ClipData, config: ClipConfig,
     touching, sinking, sliding = ground_residuals(x, data, config)
     frames = jnp.concatenate([reprojection.reshape(t, -1), direction.reshape(t, -1), limits, prior.reshape(t, -1),
                               hold.reshape(t, -1), touching, sinking], 1)
-    motion = motion_residuals(x, y.pose_rotvecs, motion_rows(data), data.fps, config)
+    motion = motion_residuals(x, y.pose_rotvecs, motion_rows(data), data.fps, config, data.scene_from_camera)
     return ClipResiduals(frames, jnp.concatenate([motion, sliding.reshape(t, -1)], 1), shared)
 
 
@@ -288,34 +293,56 @@ def contact_weights(data: ClipData) -> tuple[Float[Array, "T 4"], Float[Array, "
     return touching, free, planted
 
 
-def heights_above_floor(x: Float[Array, "T 67 3"], ground: ClipGround) -> Float[Array, "T 4"]:
-    """How far each of `FOOT_KEYPOINTS`' soles is above the floor (metres; negative below it), the foot flat."""
-    return x[:, FOOT_KEYPOINTS] @ ground.floor[:3] + ground.floor[3] - ground.above_sole
+def floor_normals(data: ClipData) -> Float[Array, "T 3"]:
+    """The floor's up direction in each frame's camera axes."""
+    return jnp.einsum("tji,j->ti", rotvec_to_rotmat(data.scene_from_camera), data.ground.floor[:3])
+
+
+def heights_above_floor(x: Float[Array, "T 67 3"], data: ClipData) -> Float[Array, "T 4"]:
+    """How far each of `FOOT_KEYPOINTS`' soles (``x`` in the camera frame) is above the floor (metres; negative
+    below it), the foot flat."""
+    return (jnp.einsum("tkc,tc->tk", x[:, FOOT_KEYPOINTS], floor_normals(data)) + data.ground.floor[3]
+            - data.ground.above_sole)
 
 
 def ground_residuals(x: Float[Array, "T 67 3"], data: ClipData, config: ClipConfig
                      ) -> tuple[Float[Array, "T 4"], Float[Array, "T 4"], Float[Array, "T 4 3"]]:
     """The ground's residuals (module docstring): each heel's and toe's sole height where it touches the floor, its
-    depth below the floor elsewhere, its velocity (to the next frame, m/s) where it is planted, each over its
-    sigma."""
+    depth below the floor elsewhere, its velocity in the scene (to the next frame, m/s) where it is planted, each
+    over its sigma."""
     touching, free, planted = contact_weights(data)
-    height = heights_above_floor(x, data.ground) / config.contact_height_sigma_m
-    feet = x[:, FOOT_KEYPOINTS]
+    height = heights_above_floor(x, data) / config.contact_height_sigma_m
+    feet = jnp.einsum("tij,tkj->tki", rotvec_to_rotmat(data.scene_from_camera), x[:, FOOT_KEYPOINTS])
     velocity = jnp.concatenate([feet[1:] - feet[:-1], jnp.zeros_like(feet[:1])]) * data.fps
     return (touching * height, free * jax.nn.relu(-height),
             planted[..., None] * velocity / config.planted_speed_sigma)
 
 
+def in_scene(x: Float[Array, "T K 3"], pose_rotvecs: Float[Array, "T J 3"], scene_from_camera: Float[Array, "T 3"]
+             ) -> tuple[Float[Array, "T K 3"], Float[Array, "T J 3"]]:
+    """The keypoints ``x`` (camera frame) and the rotations ``pose_rotvecs`` (the global orientation first) in the
+    scene's axes (module docstring)."""
+    q = rotvec_to_quat(scene_from_camera)
+    root = quat_to_rotvec(quat_product(q, rotvec_to_quat(pose_rotvecs[:, 0])))
+    return (jnp.einsum("tij,tkj->tki", rotvec_to_rotmat(scene_from_camera), x),
+            jnp.concatenate([root[:, None], pose_rotvecs[:, 1:]], 1))
+
+
 def motion_residuals(x: Float[Array, "T K 3"], pose_rotvecs: Float[Array, "T J 3"], rows: Float[Array, "T K"],
-                     fps, config: ClipConfig) -> Float[Array, "T M"]:
-    """The motion's residuals (module docstring) of the keypoints ``x`` and the body joints' rotations (the first
-    `BODY` of ``pose_rotvecs``), each frame's where ``rows`` (`motion_rows`) says; zero in the first and last.
-    The angular accelerations count where a frame's first keypoint's row does (the body's, or a hand's own)."""
+                     fps, config: ClipConfig, scene_from_camera: Float[Array, "T 3"] | None = None
+                     ) -> Float[Array, "T M"]:
+    """The motion's residuals (module docstring) of the keypoints ``x`` (camera frame) and the body joints'
+    rotations (the first `BODY` of ``pose_rotvecs``), in the scene's axes (`in_scene`; None: the camera's), each
+    frame's where ``rows`` (`motion_rows`) says; zero in the first and last. The angular accelerations count where a
+    frame's first keypoint's row does (the body's, or a hand's own)."""
+    pose_rotvecs = pose_rotvecs[:, :BODY]
+    if scene_from_camera is not None:
+        x, pose_rotvecs = in_scene(x, pose_rotvecs, scene_from_camera)
     t = x.shape[0]
     acceleration = (jnp.concatenate([jnp.zeros_like(x[:1]), x[:-2] - 2 * x[1:-1] + x[2:], jnp.zeros_like(x[:1])])
                     if t > 2 else jnp.zeros_like(x)) * fps**2
     motion = rows[..., None] * acceleration / config.acceleration_sigma
-    angular = rows[:, :1, None] * _angular_accelerations(pose_rotvecs[:, :BODY]) * fps**2 / (
+    angular = rows[:, :1, None] * _angular_accelerations(pose_rotvecs) * fps**2 / (
         config.angular_acceleration_sigma)
     return jnp.concatenate([motion.reshape(t, -1), angular.reshape(t, -1)], 1)
 
@@ -447,8 +474,9 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
     (through the pinhole's Jacobian, at Cauchy's weight), their accelerations, the bones' directions (at Cauchy's
     weight), the joints' angular accelerations (their turns taken as their increments) and the priors, limits and
     holds, coupled to the frames beside it by the accelerations; of each hand's fingers likewise (their coupling to
-    the body left out); the shape's diagonal. Blended skinning is left out (millimetres); any positive definite
-    blocks make the solve converge, these make it fast."""
+    the body left out); the shape's diagonal. Blended skinning is left out (millimetres), and a turning camera's
+    turn between neighbouring frames from their coupling (a degree or so); any positive definite blocks make the
+    solve converge, these make it fast."""
     betas = shape_of(y, data)
     km = data.km
     pose = jax.vmap(full_pose)(y.pose_rotvecs, data.fixed_pose)
@@ -470,11 +498,12 @@ def preconditioner(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> ClipB
         eye, image.shape)
     # the ground's: a sole's height along the floor's normal, where it touches or sinks; a planted foot's velocity
     touching, free, planted = contact_weights(data)
-    normal = data.ground.floor[:3]
-    across_floor = (touching + free * (heights_above_floor(x, data.ground) < 0)) / config.contact_height_sigma_m**2
+    normal = floor_normals(data)
+    across_floor = (touching + free * (heights_above_floor(x, data) < 0)) / config.contact_height_sigma_m**2
     still = (data.fps / config.planted_speed_sigma) ** 2
     rolling = still * (planted + jnp.concatenate([jnp.zeros_like(planted[:1]), planted[:-1]]))
-    motion = motion.at[:, FOOT_KEYPOINTS].add(across_floor[..., None, None] * jnp.outer(normal, normal)
+    motion = motion.at[:, FOOT_KEYPOINTS].add(across_floor[..., None, None] * (normal[:, None, :, None]
+                                                                               * normal[:, None, None, :])
                                                + rolling[..., None, None] * eye)
     unit, length = _bones(x)
     weight = (data.direction_weight * data.found[:, None] * bone_weight
@@ -537,8 +566,8 @@ def clip_problem(model: BodyModel | KeypointModel, keypoints: Float[ArrayLike, "
                  fps: float | Float[ArrayLike, ""], keypoint_sigma_px: Float[ArrayLike, "T 67"],
                  directions: Float[ArrayLike, "T N 3"] | None = None,
                  direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
-                 fit_betas: bool | Bool[ArrayLike, ""] = True, ground: ClipGround | None = None
-                 ) -> tuple[ClipUnknowns, ClipData]:
+                 fit_betas: bool | Bool[ArrayLike, ""] = True, ground: ClipGround | None = None,
+                 scene_from_camera: Float[ArrayLike, "T 3"] | None = None) -> tuple[ClipUnknowns, ClipData]:
     """The start and the data of `fit_clip`'s problem (its arguments; ``model`` or its OpenPose keypoint model,
     `fitting.openpose_keypoint_model`, already built), for `residuals`, `preconditioner` and `solve_clip`."""
     dtype = init.global_orient.dtype
@@ -562,7 +591,8 @@ def clip_problem(model: BodyModel | KeypointModel, keypoints: Float[ArrayLike, "
                     jnp.asarray(principal_point, dtype), jnp.asarray(fps, dtype),
                     jnp.asarray(fit_betas, dtype),
                     ClipGround.none(t, dtype) if ground is None else jax.tree.map(lambda a: jnp.asarray(a, dtype),
-                                                                                  ClipGround(*ground)))
+                                                                                  ClipGround(*ground)),
+                    jnp.zeros((t, 3), dtype) if scene_from_camera is None else jnp.asarray(scene_from_camera, dtype))
     return start, data
 
 
@@ -571,7 +601,8 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
              fps: float | Float[ArrayLike, ""],
              keypoint_sigma_px: Float[ArrayLike, "T 67"], directions: Float[ArrayLike, "T N 3"] | None = None,
              direction_weight: Float[ArrayLike, "T N"] | None = None, found: Bool[ArrayLike, "T"] | None = None,
-             fit_betas: bool = True, ground: ClipGround | None = None, config: ClipConfig | None = None,
+             fit_betas: bool = True, ground: ClipGround | None = None,
+             scene_from_camera: Float[ArrayLike, "T 3"] | None = None, config: ClipConfig | None = None,
              adjoint: optx.AbstractAdjoint | None = None) -> ClipResult:
     """Fit one person's clip (module docstring). ``keypoints (T, 67, 3)``: OpenPose BODY_25 and both hands, x, y
     in pixels and a confidence (0, NaN or inf: missing); ``init``: each frame's start (T leading; ``transl`` in the
@@ -580,7 +611,8 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
     ``directions`` and ``direction_weight``: the observed unit direction of each of `BONES` in the camera's axes
     and its confidence (None: no 3D observation); ``found``: where the person is (default: where any keypoint
     is); ``fit_betas`` False holds the shape at the start's; ``ground`` the floor and the feet's contacts
-    (`ClipGround`; None: no floor).
+    (`ClipGround`, the scene's frame; None: no floor); ``scene_from_camera`` each frame's camera axes turned into
+    the scene's, axis-angles (None: a static camera, the scene's axes the camera's).
 
     Pure: works under `jax.jit` (one program per clip length) and `jax.grad`; gradients with respect to the
     observations come from implicit differentiation of the optimum (``adjoint`` None, `optimistix.ImplicitAdjoint`:
@@ -589,7 +621,8 @@ def fit_clip(model: BodyModel, keypoints: Float[ArrayLike, "T 67 3"], init: SMPL
     on every device, as `fitting.fit_one`'s."""
     problem = clip_problem(model, keypoints, init, focal_length=focal_length, principal_point=principal_point, fps=fps,
                            keypoint_sigma_px=keypoint_sigma_px, directions=directions,
-                           direction_weight=direction_weight, found=found, fit_betas=fit_betas, ground=ground)
+                           direction_weight=direction_weight, found=found, fit_betas=fit_betas, ground=ground,
+                           scene_from_camera=scene_from_camera)
     return solve_clip(*problem, shape_moves=fit_betas, num_expression=model.num_expression, config=config,
                       adjoint=adjoint)
 

@@ -95,7 +95,7 @@ def start_jitter(y: ClipUnknowns, data: ClipData, config: ClipConfig) -> Float[A
     shakes from frame to frame far beyond the motion's standard deviations; that noise, which the fit smooths
     away, must not choose the hypotheses, so the motion's residuals weigh against it."""
     rows = motion_rows(data)
-    start = motion_residuals(keypoints_3d(y, data), y.pose_rotvecs, rows, data.fps, config)
+    start = motion_residuals(keypoints_3d(y, data), y.pose_rotvecs, rows, data.fps, config, data.scene_from_camera)
     counted = jnp.concatenate([jnp.repeat(rows, 3, 1), jnp.repeat(rows[:, :1], start.shape[1] - 3 * rows.shape[1], 1)],
                               1)
     spread = 1.4826 * jnp.nanmedian(jnp.where(counted > 0, jnp.abs(start), jnp.nan), 0)
@@ -126,8 +126,10 @@ def hypothesis_costs(y: ClipUnknowns, data: ClipData, config: ClipConfig
     def triple(xa, xb, xc, ra, rb, rc):  # the motion's cost in each frame with codes a, b, c in it and beside it
         if xa.shape[0] < 3:
             return jnp.zeros(xa.shape[:1], xa.dtype)
-        threes = [jnp.stack([a[:-2], b[1:-1], c[2:]], 1) for a, b, c in ((xa, xb, xc), (ra, rb, rc), (rows,) * 3)]
-        middle = jax.vmap(lambda x3, r3, w3: motion_residuals(x3, r3, w3, data.fps, config)[1])(*threes) / scale
+        threes = [jnp.stack([a[:-2], b[1:-1], c[2:]], 1)
+                  for a, b, c in ((xa, xb, xc), (ra, rb, rc), (rows,) * 3, (data.scene_from_camera,) * 3)]
+        middle = jax.vmap(lambda x3, r3, w3, s3: motion_residuals(x3, r3, w3, data.fps, config, s3)[1])(
+            *threes) / scale
         zero = jnp.zeros((1,), xa.dtype)
         return jnp.concatenate([zero, 0.5 * jnp.sum(middle**2, -1), zero])
 

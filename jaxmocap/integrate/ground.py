@@ -1,4 +1,8 @@
-"""The floor under a clip and the world frame standing on it (DESIGN 2.3, "World frame"), for a static camera.
+"""The floor under a clip and the world frame standing on it (DESIGN 2.3, "World frame").
+
+Everything here is in the scene's frame: the camera's where it is static, else the axes of a camera that does not
+turn (the first frame's; ``scene_from_camera``, each frame's turn, `jaxmocap.detect.camera_turns`), its centre the
+camera's. The world frame is fixed in the scene, so a turning camera's ``camera_from_world`` turns with it.
 
 The floor's normal is the scene's vertical where its upright edges show it (`jaxmocap.detect.verticals`: a fraction
 of a degree through the right lens). Without them it is fitted to the feet: a foot carrying weight is at rest, on
@@ -7,10 +11,9 @@ joint stands its own height above its sole, `sole_heights`), its normal drawn to
 (people stand and walk upright), which decides it where the resting feet span too little of the floor to tilt a
 plane; a monocular fit's feet tilt it by tens of degrees where a person stays in one place. The floor's height is
 the resting soles' either way. The world frame (`world_frame`): y up along the floor's normal, the floor (the
-soles' plane) y = 0, z the camera's forward direction along the floor, the origin on the floor under the main
+soles' plane) y = 0, z the scene's forward direction along the floor, the origin on the floor under the main
 person's pelvis in their first valid frame. `standing` finds the floor and the feet's contacts of a clip's motion
-in the camera's frame (the clip fit is then refitted on them: `ClipGround`), `world_arrays` its motion.npz world
-keys.
+(the clip fit is then refitted on them: `ClipGround`), `world_arrays` its motion.npz world keys.
 """
 
 import math
@@ -37,7 +40,7 @@ PLANE_ITERATIONS = 5  # refits with the points found touching the floor (it sett
 
 
 class Floor(NamedTuple):
-    """The plane ``normal · X + offset = 0`` in the camera's frame (metres), ``normal`` the unit up direction."""
+    """The plane ``normal · X + offset = 0`` in the scene's frame (metres), ``normal`` the unit up direction."""
 
     normal: Float[np.ndarray, "3"]
     offset: float
@@ -119,8 +122,9 @@ def floor_plane(feet: Float[np.ndarray, "N 3"], above_sole: Float[np.ndarray, "N
 
 
 def world_frame(floor: Floor, origin: Float[np.ndarray, "3"]) -> Float[np.ndarray, "4 4"]:
-    """``camera_from_world``: y up along the floor's normal, z the camera's forward direction along the floor (its
-    x where it looks straight down), x = y × z; the origin the floor's point under ``origin`` (camera frame)."""
+    """``scene_from_world`` (a static camera's ``camera_from_world``): y up along the floor's normal, z the scene's
+    forward direction along the floor (its x where it looks straight down), x = y × z; the origin the floor's point
+    under ``origin`` (the scene's frame)."""
     y = floor.normal
     forward = np.array([0.0, 0.0, 1.0]) - y[2] * y
     if np.linalg.norm(forward) < 1e-3:  # looking straight down: z along the camera's x
@@ -141,14 +145,39 @@ def contacts(feet: Float[np.ndarray, "T 4 3"], above_sole: Float[np.ndarray, "4"
 
 
 def world_pose(global_orient: Float[np.ndarray, "T 3"], transl: Float[np.ndarray, "T 3"],
-               pelvis: Float[np.ndarray, "T 3"], camera_from_world: Float[np.ndarray, "4 4"]):
-    """``(world_global_orient, world_transl)``: the body in the world frame. The root turns about the rest
-    pelvis ``J0 = pelvis - transl`` (its camera-frame position less ``transl``), so ``world_transl`` is
-    ``R^T (pelvis - t) - J0``."""
-    rotation, t = camera_from_world[:3, :3], camera_from_world[:3, 3]
+               pelvis: Float[np.ndarray, "T 3"], camera_from_world: Float[np.ndarray, "T 4 4"]):
+    """``(world_global_orient, world_transl)``: the body in the world frame, from each frame's camera. The root
+    turns about the rest pelvis ``J0 = pelvis - transl`` (its camera-frame position less ``transl``), so
+    ``world_transl`` is ``R^T (pelvis - t) - J0``."""
+    rotation, t = camera_from_world[:, :3, :3], camera_from_world[:, :3, 3]
     root = np.asarray(smplx_jax.rotations.rotvec_to_rotmat(np.asarray(global_orient, np.float64)))
-    world_orient = np.asarray(smplx_jax.rotations.rotmat_to_rotvec(rotation.T @ root))
-    return world_orient, (pelvis - t) @ rotation - (pelvis - transl)
+    world_orient = np.asarray(smplx_jax.rotations.rotmat_to_rotvec(np.swapaxes(rotation, 1, 2) @ root))
+    return world_orient, np.einsum("tji,tj->ti", rotation, pelvis - t) - (pelvis - transl)
+
+
+def in_scene(points: Float[np.ndarray, "T *K 3"], scene_from_camera: Float[np.ndarray, "T 3"] | None
+             ) -> Float[np.ndarray, "T *K 3"]:
+    """Each frame's camera-frame ``points`` in the scene's frame (None: a static camera's, as they are)."""
+    if scene_from_camera is None:
+        return points
+    turn = np.asarray(smplx_jax.rotations.rotvec_to_rotmat(np.asarray(scene_from_camera, np.float64)))
+    return np.einsum("tij,t...j->t...i", turn, points)
+
+
+def cameras_from_world(scene_from_world: Float[np.ndarray, "4 4"], frames: int,
+                       scene_from_camera: Float[np.ndarray, "T 3"] | None) -> Float[np.ndarray, "T 4 4"]:
+    """Each frame's ``camera_from_world``: the scene's transform seen from that frame's camera."""
+    camera_from_scene = np.repeat(np.eye(4)[None], frames, 0)
+    if scene_from_camera is not None:
+        turn = np.asarray(smplx_jax.rotations.rotvec_to_rotmat(np.asarray(scene_from_camera, np.float64)))
+        camera_from_scene[:, :3, :3] = np.swapaxes(turn, 1, 2)
+    return camera_from_scene @ scene_from_world
+
+
+def camera_floors(camera_from_world: Float[np.ndarray, "T 4 4"]) -> Float[np.ndarray, "T 4"]:
+    """Each frame's floor (the world's y = 0) in its camera's frame, ``(nx, ny, nz, d)`` as motion.npz's."""
+    up = camera_from_world[:, :3, 1]
+    return np.concatenate([up, -np.sum(up * camera_from_world[:, :3, 3], 1, keepdims=True)], 1)
 
 
 class Standing(NamedTuple):
@@ -166,16 +195,18 @@ class Standing(NamedTuple):
 
 
 def standing(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]], fps: float,
-             scene_up=None) -> Standing | None:
-    """The floor under everyone of a clip and their feet's contacts with it, from their bodies in the camera's
-    frame and where they are valid (``people``: by identity); None without a valid frame. ``scene_up(near)``: the
-    scene's vertical near the torsos' up (`jaxmocap.detect.verticals`), or None: where it gives one, it is the
-    floor's normal (its edges hold it to a fraction of a degree; a monocular fit's resting feet, to several)."""
+             scene_up=None, scene_from_camera: Float[np.ndarray, "T 3"] | None = None) -> Standing | None:
+    """The floor under everyone of a clip (the scene's frame) and their feet's contacts with it, from their bodies
+    in the camera's frame and where they are valid (``people``: by identity), each frame's camera turned into the
+    scene's axes by ``scene_from_camera`` (None: a static camera); None without a valid frame. ``scene_up(near)``:
+    the scene's vertical near the torsos' up (`jaxmocap.detect.verticals`; the scene's axes), or None: where it
+    gives one, it is the floor's normal (its edges hold it to a fraction of a degree; a monocular fit's resting
+    feet, to several)."""
     valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
     seen = [i for i in people if valid[i].any()]
     if not seen:
         return None
-    joints = {i: body_joints(model, params) for i, (params, _) in people.items()}
+    joints = {i: in_scene(body_joints(model, params), scene_from_camera) for i, (params, _) in people.items()}
     feet = {i: j[:, FOOT_JOINTS] for i, j in joints.items()}
     resting = {i: at_rest(feet[i], valid[i], fps) for i in people}
     above = {i: sole_heights(model, params.betas[np.argmax(valid[i])]) if i in seen else np.zeros(4)
@@ -190,19 +221,24 @@ def standing(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLX
 
 
 def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]],
-                 main: int, ground: Standing) -> dict[int, dict[str, np.ndarray]]:
+                 main: int, ground: Standing, scene_from_camera: Float[np.ndarray, "T 3"] | None = None
+                 ) -> dict[int, dict[str, np.ndarray]]:
     """Each person's motion.npz world keys (``world_global_orient``, ``world_transl``, ``camera_from_world``,
-    ``floor``, ``contact``) from their bodies in the camera's frame and where they are valid (``people``: by
-    identity), standing on ``ground`` (`standing` of these people), the origin under ``main`` (or the first valid
-    person)."""
+    ``floor`` (the scene's frame: the first frame's camera's), ``contact``) from their bodies in the camera's frame
+    and where they are valid (``people``: by identity), each frame's camera turned into the scene's axes by
+    ``scene_from_camera`` (None: a static camera), standing on ``ground`` (`standing` of these people), the origin
+    under ``main`` (or the first valid person)."""
     valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
     first = main if valid[main].any() else next(i for i in people if valid[i].any())
     pelvis = {i: body_joints(model, params)[:, PELVIS] for i, (params, _) in people.items()}
-    camera_from_world = world_frame(ground.floor, pelvis[first][np.argmax(valid[first])])
+    start = np.argmax(valid[first])
+    origin = in_scene(pelvis[first][start:start + 1], None if scene_from_camera is None else
+                      np.asarray(scene_from_camera)[start:start + 1])[0]
+    camera_from_world = cameras_from_world(world_frame(ground.floor, origin), len(valid[first]), scene_from_camera)
     out = {}
     for i, (params, _) in people.items():
         orient, transl = world_pose(params.global_orient, params.transl, pelvis[i], camera_from_world)
         out[i] = {"world_global_orient": orient.astype(np.float32), "world_transl": transl.astype(np.float32),
-                  "camera_from_world": np.repeat(camera_from_world[None], len(valid[i]), 0).astype(np.float32),
+                  "camera_from_world": camera_from_world.astype(np.float32),
                   "floor": ground.floor.array.astype(np.float32), "contact": ground.contact[i]}
     return out

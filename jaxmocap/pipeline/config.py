@@ -11,6 +11,7 @@ from jaxmocap.errors import InputError
 MODES = ("whole", "body", "hands")
 INTEGRATIONS = ("optimize", "copy-paste", "eft")
 HAND_BOXES = ("keypoints", "body")
+CAMERAS = ("turns", "static")
 EXPORT_FILES = {"bvh": "motion.bvh", "gltf": "motion.glb"}
 AT_THE_END = {"chunks": False}  # field metadata: an option used only after the last chunk, so stored chunks stay
 
@@ -32,7 +33,9 @@ class RunConfig:
     or lite;
     ``full`` where the one asked for cannot be fetched, `jaxmocap.detect.models.available_landmarks`).
     ``start``/``end``/``stride``: the frames used. ``chunk_size``: frames per resumable chunk. ``iterations``: fit
-    iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``smooth``: the clip
+    iterations. ``focal_length``: the camera's, pixels (default: a phone's main camera). ``camera``: ``turns``, a
+    video camera's turns measured from the background (`jaxmocap.detect.camera_turns`; a still camera's are none),
+    or ``static``, a camera held still (not measured). ``smooth``: the clip
     fit's motion between frames (False: frames fitted as unrelated images; ``hands`` mode: each side's frames
     fitted as one, `integrate.hand_clip`; copy-and-paste and EFT give the regressors' bodies unsmoothed);
     ``overlay``, ``exports`` (of `EXPORT_FILES`), ``frankmocap_pkl``, ``save_frames`` (a video's frames as
@@ -57,6 +60,7 @@ class RunConfig:
     chunk_size: int = 128
     iterations: int = 20
     focal_length: float | None = None
+    camera: str = "turns"
     smooth: bool = field(default=True, metadata=AT_THE_END)
     overlay: bool = field(default=True, metadata=AT_THE_END)
     exports: tuple[str, ...] = field(default=(), metadata=AT_THE_END)
@@ -71,6 +75,8 @@ class RunConfig:
             raise InputError(f"unknown integration {self.integration!r} ({', '.join(INTEGRATIONS)})")
         if self.landmarks not in LANDMARK_MODELS:
             raise InputError(f"unknown landmark model {self.landmarks!r} ({', '.join(LANDMARK_MODELS)})")
+        if self.camera not in CAMERAS:
+            raise InputError(f"unknown camera {self.camera!r} ({' or '.join(CAMERAS)})")
         if self.hand_boxes not in HAND_BOXES:
             raise InputError(f"unknown hand boxes {self.hand_boxes!r} ({' or '.join(HAND_BOXES)})")
         if self.mode == "hands":

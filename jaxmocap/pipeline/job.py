@@ -21,10 +21,11 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.detect import Detector
+from jaxmocap.detect.camera_turns import CameraTurns, camera_motion
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import available_landmarks
-from jaxmocap.detect.verticals import Segments, scene_vertical
+from jaxmocap.detect.verticals import AGREE_RAD, Segments, scene_vertical
 from jaxmocap.frame_source import Media, open_media, sample_frames
 from jaxmocap.integrate.ground import standing, world_arrays
 from jaxmocap.io import file_sha256
@@ -48,9 +49,10 @@ from jaxmocap.pipeline.stages import (
     placed_bodies,
 )
 from jaxmocap.pipeline.whole_clip import fitted_track, with_start
+from smplx_jax.rotations import rotvec_to_rotmat
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
-SETTINGS_VERSION = 10  # of the stored chunks: bump when what a chunk holds changes
+SETTINGS_VERSION = 11  # of the stored chunks: bump when what a chunk holds changes
 
 
 @dataclass(frozen=True)
@@ -104,22 +106,24 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         with chrono("ik"):  # each frame's start, in windows placed by frame number (not by chunk)
             tracks = {i: with_start(inputs.model, t, inputs.lens) for i, t in tracks.items()}
     fit, rate = _clip_fitted(config, inputs), inputs.media.fps if video and config.smooth else None
+    turns = np.concatenate([c.scene_from_camera for c in chunks]) if _turns_measured(config, inputs) else None
     with chrono("fit"):  # the whole clip (or the regressors' shape)
 
         def person_bodies(track):
             if fit:  # the whole clip as one fit
-                return fitted_track(inputs.model, track, inputs.lens, rate)
+                return fitted_track(inputs.model, track, inputs.lens, rate, scene_from_camera=turns)
             return median_shape(track.bodies)  # as regressed
 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
     ground = None
-    if video and inputs.lens[0] is not None:  # a static camera's floor, everyone on it
+    if video and inputs.lens[0] is not None:  # the scene's floor, everyone on it
         with chrono("ground"):
             ground = standing(inputs.model, _people(tracks), inputs.media.fps,
-                              functools.partial(_scene_up, config, inputs, chunks))
+                              functools.partial(_scene_up, config, inputs, chunks), turns)
             if ground and fit and rate:  # the clip fit refitted standing on it
                 tracks = {i: dataclasses.replace(t, bodies=fitted_track(inputs.model, t, inputs.lens, rate,
-                                                                        ground=ground.clip_ground(i)))
+                                                                        ground=ground.clip_ground(i),
+                                                                        scene_from_camera=turns))
                           for i, t in tracks.items()}
     with chrono("write"):
         meta = {"fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
@@ -127,8 +131,8 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
                    for i, t in tracks.items()}
         main = main_person(motions)
-        if ground:  # a static camera's world frame, on the floor
-            world = world_arrays(inputs.model, _people(tracks), main, ground)
+        if ground:  # the scene's world frame, on the floor
+            world = world_arrays(inputs.model, _people(tracks), main, ground, turns)
             motions = {i: m | world[i] for i, m in motions.items()}
         frames = sum(len(c.frame_index) for c in chunks)
         motion = motions[main] if motions else motion_arrays(
@@ -138,7 +142,8 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     written += write_outputs(config, out_dir, inputs.model, inputs.media, motions, main, tracks, chunks, chrono)
     store.clear()
     return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions),
-                     inputs.landmarks)
+                     inputs.landmarks, None if turns is None else camera_motion(
+                         turns, np.concatenate([c.background_px for c in chunks]), max(inputs.media.size)))
 
 
 def _people(tracks: dict[int, Track]) -> dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]]:
@@ -150,16 +155,25 @@ SCENE_FRAMES = 5  # frames of a video whose straight edges show the scene's vert
 
 
 def _scene_up(config: RunConfig, inputs: Inputs, chunks: list[Chunk], near: np.ndarray) -> np.ndarray | None:
-    """The scene's vertical near ``near`` (`verticals.scene_vertical`) from `SCENE_FRAMES` frames spread over
-    those the run read, through the focal length its edges show unless the user gave one; None for a webcam (its
-    frames are gone)."""
+    """The scene's vertical near ``near`` (`verticals.scene_vertical`; the scene's axes) from `SCENE_FRAMES` frames
+    spread over those the run read, through the focal length its edges show unless the user gave one; None for a
+    webcam (its frames are gone). A camera that turns between them by more than an edge's agreement
+    (`verticals.AGREE_RAD`) sees each frame's edges from its own axes: then each frame's vertical, turned into the
+    scene's, their mean."""
     if inputs.media.kind != "video":
         return None
     read = np.concatenate([c.frame_index for c in chunks])
-    segments = Segments.detect(sample_frames(config.source,
-                                             read[np.linspace(0, len(read) - 1, SCENE_FRAMES).astype(int)].tolist()))
-    return scene_vertical(segments, *inputs.lens, near, max(inputs.media.size),
-                          fixed=config.focal_length is not None)[0]
+    picked = np.linspace(0, len(read) - 1, SCENE_FRAMES).astype(int)
+    images = sample_frames(config.source, read[picked].tolist())
+    turn = np.asarray(rotvec_to_rotmat(np.concatenate([c.scene_from_camera for c in chunks])[picked]), np.float64)
+    if np.all(np.arccos(np.clip((np.trace(turn[0].T @ turn, axis1=1, axis2=2) - 1) / 2, -1, 1)) < AGREE_RAD):
+        groups = [(images, turn[0])]
+    else:
+        groups = [([image], r) for image, r in zip(images, turn)]
+    found = [r @ v for images, r in groups if (v := scene_vertical(
+        Segments.detect(images), *inputs.lens, r.T @ near, max(inputs.media.size),
+        fixed=config.focal_length is not None)[0]) is not None]
+    return np.mean(found, 0) / np.linalg.norm(np.mean(found, 0)) if found else None
 
 
 def _clip_fitted(config: RunConfig, inputs: Inputs) -> bool:
@@ -192,19 +206,20 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
                         max_people=1 if config.keypoints else config.max_people,
                         redetect_every=search_interval(inputs.media.fps), landmarks=inputs.landmarks)
     tracker = None if still else IdentityTracker()
+    camera = CameraTurns(inputs.lens) if _turns_measured(config, inputs) else None
     done, tracking = 0, {}
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
         for index, batch in frame_batches(inputs.frames, config.chunk_size, chrono):
             ids = np.asarray([i for i, _ in batch])
             chunk = store.load(index)
             if chunk is None or not np.array_equal(chunk.frame_index, ids):
-                chunk = solve_chunk(config, inputs, detector, tracker, ids, [frame for _, frame in batch], chrono,
-                                    observed, {int(i): k for i, k in _part(tracking, "sides/").items()})
+                chunk = solve_chunk(config, inputs, detector, tracker, camera, ids, [frame for _, frame in batch],
+                                    chrono, observed, {int(i): k for i, k in _part(tracking, "sides/").items()})
                 with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its JSON written
                     write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
                 store.save(index, chunk)
             else:
-                _restore(chunk.tracking, detector, tracker)
+                _restore(chunk.tracking, detector, tracker, camera)
             del batch  # its frames go before the next chunk's are read
             tracking = chunk.tracking
             yield chunk
@@ -214,16 +229,21 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
 
 
 def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
-                ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono, observed: Observer | None = None,
-                previous: dict[int, np.ndarray] | None = None) -> Chunk:
-    """One chunk through detection, then for each person the regressors (if any: without them the clip fit's start
-    comes over the whole track, `with_start`); ``previous``: each identity's repaired keypoints in the frame
-    before the chunk."""
+                camera: CameraTurns | None, ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono,
+                observed: Observer | None = None, previous: dict[int, np.ndarray] | None = None) -> Chunk:
+    """One chunk through detection and the camera's turns (``camera``; None: a static camera), then for each
+    person the regressors (if any: without them the clip fit's start comes over the whole track, `with_start`);
+    ``previous``: each identity's repaired keypoints in the frame before the chunk."""
     with chrono("detect"):
         given = None if inputs.given_keypoints is None else np.stack(
             [inputs.given_keypoints.get(int(i), np.zeros((67, 3))) for i in ids])
         video = inputs.media.kind in ("video", "webcam")
         people, last = observations(detector, tracker, frames, inputs.media.fps if video else None, given, previous)
+    turns, background = np.zeros((len(frames), 3), np.float32), np.full(len(frames), np.nan, np.float32)
+    if camera is not None:
+        with chrono("camera"):
+            turns, background = camera.turns(frames, [np.stack([o.body_box[k] for o in people.values()])
+                                                      if people else np.zeros((0, 4)) for k in range(len(frames))])
     tracks = {}
     for person_id, obs in people.items():
         if inputs.regression is None:  # the start comes over the whole track (`with_start`)
@@ -237,24 +257,36 @@ def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: 
                     bodies = placed_bodies(inputs.model, bodies.params, obs.keypoints, inputs.lens, bodies.valid)
         tracks[person_id] = Track(obs.keypoints, obs.body_box, hand_boxes, obs.found, obs.body_world,
                                   obs.hands_world, obs.hands_conf, bodies)
-    chunk = Chunk(ids, tracks, _tracking(detector, tracker) | {f"sides/{i}": k for i, k in last.items()})
+    chunk = Chunk(ids, tracks, _tracking(detector, tracker, camera) | {f"sides/{i}": k for i, k in last.items()},
+                  turns, background)
     if observed is not None:
         observed(chunk, people)
     return chunk
 
 
-def _tracking(detector: Detector, tracker: IdentityTracker | None) -> dict[str, np.ndarray]:
-    """What the detector and the identities carry from one chunk to the next, as arrays."""
+def _tracking(detector: Detector, tracker: IdentityTracker | None, camera: CameraTurns | None
+              ) -> dict[str, np.ndarray]:
+    """What the detector, the identities and the camera's turns carry from one chunk to the next, as arrays."""
     identities = {} if tracker is None else {f"identities/{k}": v for k, v in tracker.state().items()}
-    return {f"detector/{k}": v for k, v in detector.state().items()} | identities
+    turns = {} if camera is None else {f"camera/{k}": v for k, v in camera.state().items()}
+    return {f"detector/{k}": v for k, v in detector.state().items()} | identities | turns
 
 
 def _part(tracking: dict[str, np.ndarray], prefix: str) -> dict[str, np.ndarray]:
     return {k.split("/", 1)[1]: v for k, v in tracking.items() if k.startswith(prefix)}
 
 
-def _restore(tracking: dict[str, np.ndarray], detector: Detector, tracker: IdentityTracker | None) -> None:
+def _restore(tracking: dict[str, np.ndarray], detector: Detector, tracker: IdentityTracker | None,
+             camera: CameraTurns | None) -> None:
     detector.restore(_part(tracking, "detector/"))
     if tracker is not None:
         tracker.restore(_part(tracking, "identities/"))
+    if camera is not None:
+        camera.restore(_part(tracking, "camera/"))
+
+
+def _turns_measured(config: RunConfig, inputs: Inputs) -> bool:
+    """Whether the run measures the camera's turns: a video (or webcam) through a pinhole camera, unless
+    ``--camera static``."""
+    return config.camera == "turns" and inputs.media.kind in ("video", "webcam") and inputs.lens[0] is not None
 

@@ -14,6 +14,7 @@ from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.export import animation, write_bvh, write_gltf
 from jaxmocap.export.frankmocap import write_frankmocap_pkls
 from jaxmocap.frame_source import Media, open_media
+from jaxmocap.integrate.ground import camera_floors
 from jaxmocap.io import atomic_path, atomic_write_bytes
 from jaxmocap.motion import lens, motion_params
 from jaxmocap.overlay import OverlayWriter, Posed, body_up
@@ -34,10 +35,10 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dic
     orients = [m["global_orient"][m["valid"]] for m in motions.values()]
     up = body_up(np.concatenate(orients)) if sum(map(len, orients)) else None
     lenses = lens(next(iter(motions.values()))) if motions else (None, None)
-    floor = next((m["floor"] for m in motions.values() if "floor" in m), None)  # everyone's
+    world = next((m["camera_from_world"] for m in motions.values() if "camera_from_world" in m), None)  # everyone's
+    floors = [None] * total if world is None else camera_floors(np.asarray(world, np.float64))
     with atomic_path(path) as tmp, \
-            OverlayWriter(tmp, image_size, media.fps, faces, lens=lenses, up=up, spread=_spread(motions),
-                          floor=floor) as writer, \
+            OverlayWriter(tmp, image_size, media.fps, faces, lens=lenses, up=up, spread=_spread(motions)) as writer, \
             tqdm(total=total, unit="frame", desc="overlay", disable=not config.progress) as bar:
         for start in range(0, total, _BATCH):
             batch = [frame for _, (_, frame) in zip(range(min(_BATCH, total - start)), frames)]
@@ -51,7 +52,7 @@ def write_overlay(path: Path, model: smplx_jax.BodyModel, motions: dict[int, dic
                     if motion["valid"][t]:
                         people[k].append(Posed(person_id, vertices[k], float(motion["camera_scale"][t]),
                                                motion["camera_trans"][t]))
-            writer.write(*zip(batch, people))
+            writer.write(*zip(batch, people, floors[start:start + len(batch)]))
             bar.update(len(batch))
     return Path(path)
 

@@ -69,16 +69,21 @@ class Track:
 
 @dataclass(frozen=True)
 class Chunk:
-    """One chunk of frames: each person's `Track` by identity, and what the detector and the identities carry on
-    to the next chunk (``tracking``)."""
+    """One chunk of frames: each person's `Track` by identity, what the detector, the identities and the camera's
+    turns carry on to the next chunk (``tracking``), and each frame's camera turn
+    (`jaxmocap.detect.camera_turns.CameraTurns.turns`)."""
 
     frame_index: np.ndarray  # (n,) frame numbers in the source
     people: dict[int, Track]
     tracking: dict[str, np.ndarray]
+    scene_from_camera: np.ndarray  # (n, 3) axis-angles: the camera's axes turned into the scene's
+    background_px: np.ndarray  # (n,) the background's stray from that turn, pixels (NaN: not measured)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Flat named arrays (the chunk file's keys: ``frame_index``, ``tracking/<key>``, ``<id>/<field>``)."""
-        arrays = {"frame_index": self.frame_index} | {f"tracking/{k}": v for k, v in self.tracking.items()}
+        """Flat named arrays (the chunk file's keys: ``frame_index``, ``scene_from_camera``, ``background_px``,
+        ``tracking/<key>``, ``<id>/<field>``)."""
+        arrays = {"frame_index": self.frame_index, "scene_from_camera": self.scene_from_camera,
+                  "background_px": self.background_px} | {f"tracking/{k}": v for k, v in self.tracking.items()}
         for person_id, track in self.people.items():
             leaves = {f.name: getattr(track, f.name) for f in dataclasses.fields(track) if f.name != "bodies"}
             leaves |= {k: getattr(track.bodies, k) for k in ("camera_scale", "camera_trans", "valid")}
@@ -96,4 +101,4 @@ class Chunk:
             bodies = Bodies(params, a["camera_scale"], a["camera_trans"], a["valid"])
             people[person_id] = Track(a["keypoints_2d"], a["body_box"], a["hand_boxes"], a["found"], a["body_world"],
                                       a["hands_world"], a["hands_conf"], bodies)
-        return cls(arrays["frame_index"], people, tracking)
+        return cls(arrays["frame_index"], people, tracking, arrays["scene_from_camera"], arrays["background_px"])

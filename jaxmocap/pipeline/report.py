@@ -16,3 +16,4 @@ class RunReport:
     written: list[Path]
     people: list[int]  # the identities with a motion in ``people/<id>/``
     landmarks: str | None = None  # the BlazePose landmark model the detector ran (None: no body detector)
+    camera: str | None = None  # how the camera moved (a video through a pinhole camera), one line

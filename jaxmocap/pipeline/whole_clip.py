@@ -153,12 +153,12 @@ def _windows_of(fun):
     """``fun`` over windows, their arrays (but for the lens and frame rate) leading with a window axis; matrix
     products in full float32 on every device, as the clip fit's."""
     def over_windows(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found,
-                     ground, *, fit_betas: bool, config: ClipConfig):
-        def one(k, s, g, d, w, f, floor):
-            return fun(model, k, s, focal_length, principal_point, fps, g, d, w, f, floor, fit_betas=fit_betas,
+                     ground, turns, *, fit_betas: bool, config: ClipConfig):
+        def one(k, s, g, d, w, f, floor, turn):
+            return fun(model, k, s, focal_length, principal_point, fps, g, d, w, f, floor, turn, fit_betas=fit_betas,
                        config=config)
 
-        windows = (keypoints, start, sigma, directions, weight, found, ground)
+        windows = (keypoints, start, sigma, directions, weight, found, ground, turns)
         with jax.default_matmul_precision("highest"):
             if keypoints.shape[0] == 1:  # unbatched: a vmapped solve's loop selects every value it carries each step
                 return jax.tree.map(lambda a: a[None], one(*jax.tree.map(lambda a: a[0], windows)))
@@ -168,19 +168,19 @@ def _windows_of(fun):
 
 
 @_windows_of
-def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, ground, *,
-         fit_betas: bool, config: ClipConfig):
+def _fit(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found, ground,
+         turns, *, fit_betas: bool, config: ClipConfig):
     return fit_clip(model, keypoints, start, focal_length=focal_length, principal_point=principal_point, fps=fps,
                     keypoint_sigma_px=sigma, directions=directions, direction_weight=weight, found=found,
-                    fit_betas=fit_betas, ground=ground, config=config)
+                    fit_betas=fit_betas, ground=ground, scene_from_camera=turns, config=config)
 
 
 @_windows_of
 def _hypotheses(model, keypoints, start, focal_length, principal_point, fps, sigma, directions, weight, found,
-                ground, *, fit_betas: bool, config: ClipConfig):
+                ground, turns, *, fit_betas: bool, config: ClipConfig):
     y, data = clip_problem(model, keypoints, start, focal_length=focal_length, principal_point=principal_point,
                            fps=fps, keypoint_sigma_px=sigma, directions=directions, direction_weight=weight,
-                           found=found, fit_betas=fit_betas)
+                           found=found, fit_betas=fit_betas, scene_from_camera=turns)
     return hypothesis_costs(y, data, config)
 
 
@@ -267,25 +267,28 @@ class FittedClip(NamedTuple):
 
 
 def fitted_track(model: smplx_jax.BodyModel, track: Track, lens, fps: float | None,
-                 config: ClipConfig = ClipConfig(), ground: ClipGround | None = None) -> Bodies:
+                 config: ClipConfig = ClipConfig(), ground: ClipGround | None = None,
+                 scene_from_camera: Float[ArrayLike, "T 3"] | None = None) -> Bodies:
     """The track's bodies as one fit (`fitted_clip`) through the pinhole ``lens``, observing its 2D keypoints and
     its 3D landmarks' bone directions (`bone_directions`), a hand lost for a moment interpolated in a video:
     ``track.bodies`` is each frame's start (its ``transl`` in the camera frame); ``fps`` the frame rate (None:
     unrelated images, no motion between them). With ``ground`` (its floor and the feet's contacts,
     `integrate.ground.Standing.clip_ground`), ``track.bodies`` is a fit of the track already, refitted standing
-    on it. Valid where the start was."""
+    on it. ``scene_from_camera``: each frame's camera turned into the scene's axes (None: a static camera). Valid
+    where the start was."""
     if fps:
         track = with_hand_gaps_filled(track, round(HAND_GAP_SECONDS * fps))
     directions, weight = bone_directions(_observations(track), lens)
     return fitted_clip(model, track.keypoints_2d, track.bodies.params, track.found & track.bodies.valid, lens, fps,
-                       directions, weight, config, ground=ground).bodies
+                       directions, weight, config, ground=ground, scene_from_camera=scene_from_camera).bodies
 
 
 def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67 3"], start: smplx_jax.SMPLXParams,
                 valid: Bool[ArrayLike, "T"], lens, fps: float | None,
                 directions: Float[ArrayLike, "T N 3"] | None = None,
                 direction_weight: Float[ArrayLike, "T N"] | None = None, config: ClipConfig = ClipConfig(),
-                progress: Callable[[int], object] | None = None, ground: ClipGround | None = None) -> FittedClip:
+                progress: Callable[[int], object] | None = None, ground: ClipGround | None = None,
+                scene_from_camera: Float[ArrayLike, "T 3"] | None = None) -> FittedClip:
     """One person's frames as one fit (module docstring) through the pinhole ``lens``: ``keypoints_2d`` the 2D
     targets, ``start`` each frame's start (T leading, ``transl`` in the camera frame), fitted where ``valid``;
     ``directions`` and ``direction_weight`` the bones' observed directions and their confidence (None: none
@@ -305,6 +308,8 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
     directions, weight = np.asarray(directions, np.float32), np.asarray(direction_weight, np.float32)
     focal, centre = np.float32(lens[0]), np.asarray(lens[1], np.float32)
     on = jax.tree.map(lambda a: np.asarray(a, np.float32), ClipGround.none(count) if ground is None else ground)
+    turns = np.zeros((count, 3), np.float32) if scene_from_camera is None else np.asarray(scene_from_camera,
+                                                                                          np.float32)
 
     def solve(fit, frames, found, rate, betas=None):
         """Windows of frames ``frames`` ``(W, F)`` (indices, padded with repeats), each as one clip, the shape
@@ -316,8 +321,8 @@ def fitted_clip(model: smplx_jax.BodyModel, keypoints_2d: Float[ArrayLike, "T 67
         under = ClipGround(*(np.broadcast_to(a, (windows, *a.shape)) for a in (on.floor, on.above_sole)),
                            on.contact[frames], np.broadcast_to(on.known, (windows,)))
         return jax.device_get(fit(model, keypoints[frames], pick, focal, centre, np.float32(rate), sigma[frames],
-                                  directions[frames], weight[frames], found, under, fit_betas=betas is None,
-                                  config=config))
+                                  directions[frames], weight[frames], found, under, turns[frames],
+                                  fit_betas=betas is None, config=config))
 
     def in_windows(fit, betas, keep=lambda result, frames: result, told=lambda frames: None):
         """What ``keep`` takes of ``fit``'s results and the window's frames (frames leading) over the track, window
