@@ -353,9 +353,10 @@ class Stages:
 def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str = "heavy",
                chunk_size: int | None = None, camera: str = "turns") -> Stages:
     """``jaxmocap run`` on ``video`` (frames up to ``end``, ``chunk_size`` frames a chunk or the run's default,
-    ``--camera camera``; its motion.npz), and the stages before the clip fit from what the run itself observed, chunk by chunk (`run`'s
-    ``observed``): BlazePose's world landmarks (left and right put back where the detector exchanged them, as the
-    fit takes them) and the fit's start. The take has one person: each frame's is the lowest id found."""
+    ``--camera camera``; its motion.npz), and the stages before the clip fit from what the run itself observed,
+    chunk by chunk (`run`'s ``observed``): BlazePose's world landmarks (left and right put back where the detector
+    exchanged them, as the fit takes them) and the fit's start. The take has one person: each frame's is the lowest
+    id found."""
     import jax
 
     import smplx_jax
