@@ -36,6 +36,12 @@ class Columns:
                 fh.write(array.tobytes())
         self.layout, self.rows = layout, self.rows + counts.pop()
 
+    def read(self, name: str) -> np.ndarray:
+        """The column ``name``, every row."""
+        dtype, shape = self.layout[name]
+        return np.fromfile(self.folder / f"{name}.bin", dtype, self.rows * int(np.prod(shape, dtype=np.int64))
+                           ).reshape((self.rows,) + shape)
+
 
 def write_npz(path, columns: list[Columns], constants: dict[str, np.ndarray]) -> Path:
     """``path`` (written atomically) holding every column of ``columns`` (as many rows each) and the arrays

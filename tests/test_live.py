@@ -22,14 +22,16 @@ import numpy as np
 import pytest
 
 import smplx_jax
+from bench import accuracy
 from bench import live as live_bench
 from conftest import assert_kept_for_the_next_process, assert_one_body, cli_as_from_a_terminal
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import MediaError
 from jaxmocap.integrate import synthetic
-from jaxmocap.integrate.clip import points_3d
+from jaxmocap.integrate.clip import FOOT_JOINTS, points_3d
 from jaxmocap.integrate.inverse_kinematics import BLAZEPOSE_TO_SMPLX
 from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm
+from jaxmocap.integrate.motion_arrays import body_joints
 from jaxmocap.live import LiveConfig, LiveSettings, causal, live, params_from_message
 from jaxmocap.live.causal import CausalSolver
 from jaxmocap.live.mailbox import Closed, Mailbox
@@ -38,7 +40,7 @@ from jaxmocap.live.session import Session
 from jaxmocap.live.source import LiveSource
 from jaxmocap.live.stream import frame_message, parse_address, person_message
 from jaxmocap.live.viewer import Viewer
-from jaxmocap.motion import motion_params, read_motion
+from jaxmocap.motion import WORLD_SHAPES, motion_params, read_motion
 from jaxmocap.pipeline import RunConfig, run
 from jaxmocap.pipeline.observe import Observations, _no_one
 from jaxmocap.pipeline.stages import lens_of
@@ -233,7 +235,8 @@ def test_a_viewer_that_stops_reading_never_stalls_publishing():
 # -- the causal path on the clip ------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def played(tmp_path_factory):
-    """The clip played as fast as it is solved (every frame), recorded and streamed over UDP."""
+    """The clip played twice as fast as it is solved (every frame), recorded and streamed over UDP: long enough for
+    the floor of its first second to be found while it plays."""
     out = tmp_path_factory.mktemp("live")
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
@@ -249,7 +252,7 @@ def played(tmp_path_factory):
 
     thread = threading.Thread(target=receive)
     thread.start()
-    report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False))
+    report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False, loops=2))
     time.sleep(0.3)
     done.set()
     thread.join()
@@ -259,8 +262,8 @@ def played(tmp_path_factory):
 
 def test_every_frame_is_solved_when_played_as_fast_as_solved(played):
     report, motion, _ = played
-    assert report.stopped == "end of stream" and report.read == report.solved == 100 and report.dropped == 0
-    assert motion["valid"].sum() >= 98 and np.array_equal(motion["frame_index"], np.arange(100))
+    assert report.stopped == "end of stream" and report.read == report.solved == 200 and report.dropped == 0
+    assert motion["valid"].sum() >= 196 and np.array_equal(motion["frame_index"], np.arange(200))
     assert np.median(motion["reprojection_error_px"][motion["valid"]]) < 15.0
     assert_kept_for_the_next_process(causal.step)
 
@@ -276,13 +279,38 @@ def test_the_shape_settles_in_the_first_second_then_stays(played):
 
 def test_the_stream_carries_the_recorded_bodies(played):
     _, motion, messages = played
-    assert len(messages) >= 95  # UDP on this machine's loopback: nothing lost in practice
+    assert len(messages) >= 190  # UDP on this machine's loopback: nothing lost in practice
     for message in messages[::10]:
         row, person = message["frame"], message["people"][0]
         recorded = jax.tree.map(lambda a: a[0], motion_params(motion, 10, [row]))
         for a, b in zip(jax.tree.leaves(params_from_message(person)), jax.tree.leaves(recorded)):
             np.testing.assert_allclose(a, b, atol=2e-5)
         np.testing.assert_allclose(person["keypoints_2d"], motion["keypoints_2d"][row], atol=0.01)
+
+
+def test_the_stream_and_the_recording_stand_on_the_sessions_floor(played):
+    """Once the floor of the session's first second with the person (`world.FLOOR_SECONDS`) is found, each message
+    carries the world keys, the recording's rows the same (contacts: the recording's about each frame, the stream's
+    from the frames up to it); the floor is the room's."""
+    _, motion, messages = played
+    assert set(WORLD_SHAPES) <= set(motion)
+    with_world = [m for m in messages if "floor" in m]
+    first = min(m["frame"] for m in with_world)
+    assert first >= 60 and all(m["frame"] < first for m in messages if "floor" not in m)
+    # the room's up seen from this camera (its calibration), through the default lens (some 3 degrees off)
+    assert np.degrees(np.arccos(motion["floor"][:3] @ accuracy.room_up("cam01"))) < 4.0
+    agree = []
+    for message in with_world:
+        row, person = message["frame"], message["people"][0]
+        np.testing.assert_allclose(message["floor"], motion["floor"], atol=1e-5)
+        np.testing.assert_allclose(person["world_global_orient"], motion["world_global_orient"][row], atol=1e-4)
+        np.testing.assert_allclose(person["world_transl"], motion["world_transl"][row], atol=1e-4)
+        agree.append(np.mean(np.asarray(person["contact"]) == motion["contact"][row]))
+    assert np.mean(agree) > 0.8
+    world = motion_params(motion | {"global_orient": motion["world_global_orient"],
+                                    "transl": motion["world_transl"]}, 10)
+    soles = body_joints(smplx_jax.load_model(smplx_jax.default_model_path()), world)[:, FOOT_JOINTS, 1]
+    assert np.abs(np.median(soles[motion["contact"]])) < 0.05  # the soles' joints a few centimetres above y = 0
 
 
 def test_the_solve_runs_on_the_host_cpu():

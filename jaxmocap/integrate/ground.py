@@ -63,6 +63,14 @@ def sole_heights(model: smplx_jax.BodyModel, betas: Float[np.ndarray, "B"]) -> F
     return shaped[1, feet] - shaped[1].min()
 
 
+def rest_pelvis(model: smplx_jax.BodyModel, betas: Float[np.ndarray, "T B"]) -> Float[np.ndarray, "T 3"]:
+    """The pelvis joint of each shape ``betas`` at rest (no pose, no ``transl``): the point the root turns about,
+    so that a body's pelvis is this plus its ``transl`` whatever its pose."""
+    betas = np.asarray(betas, np.float64)
+    shapedirs = np.asarray(model.joint_shapedirs, np.float64)[0, :, :betas.shape[-1]]
+    return np.asarray(model.joint_template, np.float64)[0] + betas @ shapedirs.T
+
+
 def at_rest(feet: Float[np.ndarray, "T 4 3"], valid: Bool[np.ndarray, "T"], fps: float) -> Bool[np.ndarray, "T 4"]:
     """Which heels and toes move slower than `REST_SPEED_M_S` (over `SPEED_WINDOW_S` about each frame, valid frames
     only; frames without a valid one that far on either side are not at rest)."""
@@ -230,7 +238,7 @@ def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.S
     under ``main`` (or the first valid person)."""
     valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
     first = main if valid[main].any() else next(i for i in people if valid[i].any())
-    pelvis = {i: body_joints(model, params)[:, PELVIS] for i, (params, _) in people.items()}
+    pelvis = {i: rest_pelvis(model, params.betas) + params.transl for i, (params, _) in people.items()}
     start = np.argmax(valid[first])
     origin = in_scene(pelvis[first][start:start + 1], None if scene_from_camera is None else
                       np.asarray(scene_from_camera)[start:start + 1])[0]

@@ -17,8 +17,11 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.columns import Columns, write_npz
+from jaxmocap.integrate.clip import FOOT_JOINTS
+from jaxmocap.integrate.motion_arrays import body_joints
 from jaxmocap.io import result_arrays
 from jaxmocap.live.causal import Solved
+from jaxmocap.live.world import LiveWorld, world_columns
 from jaxmocap.motion import PINHOLE_SHAPES
 from jaxmocap.pipeline.records import Bodies
 from jaxmocap.pipeline.stages import Lens, motion_arrays
@@ -27,6 +30,7 @@ FLUSH_SECONDS = 5.0  # the most of a session a crash loses, and how often the fi
 JOURNAL = ".recording"
 CLOSE_SECONDS = 60.0  # the longest a session's end waits for its last frames written (the files rewritten whole)
 BACKFILL_ROWS = 1024  # a person first seen late: their earlier frames (absent) appended this many at a time
+FEET = ".feet"  # a person's heels and toes in the journal: the columns ``<id>.feet``, not a file's
 
 
 class Recording:
@@ -103,9 +107,9 @@ class Recording:
     def _append(self, name: str, arrays: dict[str, np.ndarray]) -> None:
         self.columns[name].append(result_arrays(arrays, self.bools))
 
-    def _npz(self, path: Path, name: str) -> Path:
-        """The file ``path`` of the columns ``name``, with the frames' and `meta`."""
-        return write_npz(path, [self.columns[name], self.frames], result_arrays(self.meta, ()))
+    def _npz(self, path: Path, name: str, more: dict[str, np.ndarray] | None = None) -> Path:
+        """The file ``path`` of the columns ``name``, with the frames', `meta` and ``more``."""
+        return write_npz(path, [self.columns[name], self.frames], result_arrays(self.meta | (more or {}), ()))
 
     def _rows(self, frames: list[tuple], names: list[str]) -> dict[str, dict[str, np.ndarray]]:
         """Each file's rows of ``frames`` (what `add` was given of each, after the frame's number and time), by
@@ -119,14 +123,16 @@ class Recording:
 class Recorder(Recording):
     """A body session's frames (`add`: the source frame's number and time, each person's `Solved` and their 2D
     keypoints (67, 3), by identity): ``motion.npz`` of the person valid in most frames and
-    ``people/<id>/motion.npz``."""
+    ``people/<id>/motion.npz``; with ``world`` (the session's `LiveWorld`), once its floor is found, their world
+    keys (`world.world_columns`, from each person's heels and toes kept in the journal beside their columns)."""
 
     bools = ("valid",)
     nothing = ({}, {})
 
     def __init__(self, folder, model: smplx_jax.BodyModel, model_sha256: str, lens: Lens, fps: float,
-                 image_size: tuple[int, int], landmarks: str, every_s: float = FLUSH_SECONDS):
-        self.model, self.lens, self.valid_frames = model, lens, {}
+                 image_size: tuple[int, int], landmarks: str, every_s: float = FLUSH_SECONDS,
+                 world: LiveWorld | None = None):
+        self.model, self.lens, self.valid_frames, self.world, self.fps = model, lens, {}, world, fps
         pinhole = {} if lens[0] is None else {"focal_length": np.asarray(lens[0]),
                                               "principal_point": np.asarray(lens[1])}
         super().__init__(folder, {"fps": np.asarray(fps), "image_size": np.asarray(image_size),
@@ -134,16 +140,23 @@ class Recorder(Recording):
                          | pinhole, every_s)
 
     def _rows(self, frames, names):
-        people = sorted({int(n) for n in names} | {i for solved, _ in frames for i in solved})
-        return {str(i): self._motion([solved.get(i) for solved, _ in frames],
-                                     [keypoints.get(i) for _, keypoints in frames]) for i in people}
+        people = sorted({int(n.split(FEET)[0]) for n in names} | {i for solved, _ in frames for i in solved})
+        rows = {}
+        for i in people:
+            motion, feet = self._motion([solved.get(i) for solved, _ in frames],
+                                        [keypoints.get(i) for _, keypoints in frames])
+            rows |= {str(i): motion, f"{i}{FEET}": {"feet": feet}}
+        return rows
 
-    def _motion(self, solved: list[Solved | None], keypoints: list[np.ndarray | None]) -> dict[str, np.ndarray]:
-        """motion.npz's per-frame arrays of one person over some frames (None: not seen)."""
+    def _motion(self, solved: list[Solved | None], keypoints: list[np.ndarray | None]
+                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """motion.npz's per-frame arrays of one person over some frames (None: not seen), and their heels and toes
+        in the camera's frame ``(n, 4, 3)``."""
         bodies = Bodies.concatenate([self._row(s) for s in solved])
         keypoints = np.stack([np.zeros((67, 3), np.float32) if k is None else k for k in keypoints])
         arrays = motion_arrays(self.model, bodies, keypoints, self.lens)
-        return {k: v for k, v in arrays.items() if k not in PINHOLE_SHAPES}  # the lens: in `meta`
+        feet = body_joints(self.model, bodies.params)[:, FOOT_JOINTS].astype(np.float32)
+        return {k: v for k, v in arrays.items() if k not in PINHOLE_SHAPES}, feet  # the lens: in `meta`
 
     def _row(self, solved: Solved | None) -> Bodies:
         """One frame of a person's `Bodies`: their solved body, or absent."""
@@ -155,9 +168,21 @@ class Recorder(Recording):
 
     def _append(self, name, arrays):
         super()._append(name, arrays)
-        self.valid_frames[name] = self.valid_frames.get(name, 0) + int(arrays["valid"].sum())
+        if "valid" in arrays:
+            self.valid_frames[name] = self.valid_frames.get(name, 0) + int(arrays["valid"].sum())
+
+    def _world(self, name: str) -> dict[str, np.ndarray]:
+        """The world keys of person ``name``'s columns (none before the floor is found)."""
+        if self.world is None:
+            return {}
+        columns = self.columns[name]
+        motion = {k: columns.read(k) for k in ("global_orient", "transl", "betas", "valid")}
+        return world_columns(self.model, self.world, motion | {"feet": self.columns[name + FEET].read("feet")},
+                             self.fps)
 
     def _write(self):
-        main = max(self.columns, key=lambda n: (self.valid_frames[n], -int(n)))  # the first seen of those tied
-        return [self._npz(self.folder / "motion.npz", main)] + [
-            self._npz(self.folder / "people" / name / "motion.npz", name) for name in self.columns]
+        people = [n for n in self.columns if FEET not in n]
+        main = max(people, key=lambda n: (self.valid_frames[n], -int(n)))  # the first seen of those tied
+        world = {name: self._world(name) for name in people}
+        return [self._npz(self.folder / "motion.npz", main, world[main])] + [
+            self._npz(self.folder / "people" / name / "motion.npz", name, world[name]) for name in people]

@@ -34,6 +34,7 @@ from jaxmocap.live.record import CLOSE_SECONDS, Recorder
 from jaxmocap.live.source import Frame, LiveSource
 from jaxmocap.live.stream import UdpSender, frame_message, person_message
 from jaxmocap.live.viewer import Viewer
+from jaxmocap.live.world import LiveWorld
 from jaxmocap.overlay import Posed, people_over_frame
 from jaxmocap.pipeline.config import MODES
 from jaxmocap.pipeline.observe import Observations, observe_people
@@ -117,6 +118,7 @@ _VERTICES = jax.jit(lambda model, params: smplx_jax.forward(model, params).verti
 # pending as the process exits can crash it); a thread still running after it is left behind, a daemon thread,
 # rather than keep the process alive.
 STOP_SECONDS = STREAM_TIMEOUT_S + 1.0
+FLOOR_WAIT_SECONDS = 10.0  # the longest a session's end waits for its floor being found (a second or two)
 
 
 class Session:
@@ -135,7 +137,7 @@ class Session:
         self.detected, self.shown = Mailbox(), Mailbox()
         self.errors: list[BaseException] = []
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, self.noun: 0}
-        self.recorder = self.viewer = None
+        self.recorder = self.viewer = self.world = None
         try:
             self._setup(file_sha256(model_path))
             self.viewer = None if config.serve is None else self._viewer()
@@ -158,8 +160,11 @@ class Session:
         self.detector = Detector(static_image_mode=False, max_people=config.max_people, hands=hands,
                                  redetect_every=search_interval(self.source.fps), landmarks=landmarks)
         self.tracker = IdentityTracker()
+        self.world = LiveWorld(self.model, self.source.fps, self.lens, max(self.source.size),
+                               fixed=config.focal_length is not None)
         self.recorder = None if config.record is None else Recorder(
-            config.record, self.model, model_sha256, self.lens, self.source.fps, self.source.size, landmarks)
+            config.record, self.model, model_sha256, self.lens, self.source.fps, self.source.size, landmarks,
+            world=self.world)
 
     def close(self) -> None:
         """Release the source, the page and the stream, then write the recording's last frames (all idempotent)."""
@@ -167,6 +172,8 @@ class Session:
         for closable in (self.viewer, self.sender):
             if closable is not None:
                 closable.close()
+        if self.world is not None:
+            self.world.settle(FLOOR_WAIT_SECONDS)  # the recording stands on the floor being found
         if self.recorder is not None:
             self.recorder.close(CLOSE_SECONDS)
 
@@ -227,10 +234,13 @@ class Session:
     def _solve(self, frame: Frame, people: dict[int, Observations]) -> dict[int, Solved]:
         now = frame.arrived if self.source.live else frame.index / self.source.fps
         solved = self.solver(people, now)
+        world = self.world.keys(now, solved, frame.image)
         if self.sender is not None:
+            camera_from_world = self.world.camera_from_world  # (set after the floor)
+            floor = None if camera_from_world is None else self.world.floor.array
             self.sender.send(frame_message(frame.index, now, [
-                person_message(i, s.params, s.camera_scale, s.camera_trans, people[i].keypoints[0])
-                for i, s in solved.items() if s.valid]))
+                person_message(i, s.params, s.camera_scale, s.camera_trans, people[i].keypoints[0], world.get(i))
+                for i, s in solved.items() if s.valid], floor=floor, camera_from_world=camera_from_world))
         if self.recorder is not None:
             self.recorder.add(frame.index, now, solved, {i: o.keypoints[0] for i, o in people.items()})
         return solved

@@ -12,21 +12,29 @@ POSE_KEYS = ("global_orient", "body_pose", "left_hand_pose", "right_hand_pose", 
 
 
 def person_message(person_id: int, params: smplx_jax.SMPLXParams, camera_scale, camera_trans,
-                   keypoints_2d: np.ndarray) -> dict:
+                   keypoints_2d: np.ndarray, world=None) -> dict:
     """One person's entry of a frame message: the SMPL-X parameters (motion.npz's keys and layout, hand poses
-    absolute), the weak-perspective camera and the 67 keypoints fitted."""
+    absolute), the weak-perspective camera and the 67 keypoints fitted; with ``world`` (their
+    `jaxmocap.live.world.WorldKeys`), ``world_global_orient``, ``world_transl`` and ``contact``."""
     out = {"id": int(person_id)}
     out |= {key: np.round(np.asarray(getattr(params, key), np.float64), 5).tolist() for key in POSE_KEYS}
+    out |= {} if world is None else {"world_global_orient": np.round(world.world_global_orient, 5).tolist(),
+                                     "world_transl": np.round(world.world_transl, 5).tolist(),
+                                     "contact": np.asarray(world.contact, bool).tolist()}
     return out | {"camera_scale": round(float(camera_scale), 4),
                   "camera_trans": np.round(np.asarray(camera_trans, np.float64), 3).tolist(),
                   "keypoints_2d": np.round(np.asarray(keypoints_2d, np.float64), 2).tolist()}
 
 
-def frame_message(frame: int, seconds: float, people: list[dict], hands: list[dict] | None = None) -> bytes:
-    """A frame's JSON line: the source frame number, its time (seconds since the start), the people, and with
-    ``--mode hands`` the hands."""
+def frame_message(frame: int, seconds: float, people: list[dict], hands: list[dict] | None = None,
+                  floor: np.ndarray | None = None, camera_from_world: np.ndarray | None = None) -> bytes:
+    """A frame's JSON line: the source frame number, its time (seconds since the start), the people, with
+    ``--mode hands`` the hands, and once the world frame is found its ``floor`` and ``camera_from_world``."""
     message = {"frame": int(frame), "time": round(seconds, 4), "people": people}
     message |= {} if hands is None else {"hands": hands}
+    if floor is not None:
+        message |= {"floor": np.round(np.asarray(floor, np.float64), 5).tolist(),
+                    "camera_from_world": np.round(np.asarray(camera_from_world, np.float64), 5).tolist()}
     return (json.dumps(message, separators=(",", ":")) + "\n").encode()
 
 
