@@ -5,7 +5,7 @@
 """
 
 from smplx_jax import constants, rotations
-from smplx_jax.default_model import default_model_path, write_default_model
+from smplx_jax.default_model import default_model_path, model_path, write_default_model
 from smplx_jax.forward import Output, Skeleton, forward, forward_joints, posed_skeleton
 from smplx_jax.hand import HandModel, HandOutput, hand_forward, hand_model
 from smplx_jax.model import BodyModel, load_model
@@ -22,5 +22,5 @@ __all__ = [
     "BodyModel", "HandModel", "HandOutput", "ModelFileError", "ModelNotFoundError", "Output", "SMPLXParams",
     "Skeleton", "constants", "default_model_path", "forward", "forward_joints", "hand_forward", "hand_model",
     "hand_pose_from_pca", "hand_pose_from_relative", "hand_pose_to_pca", "hand_pose_to_relative", "load_model",
-    "posed_skeleton", "rotations", "write_default_model",
+    "model_path", "posed_skeleton", "rotations", "write_default_model",
 ]

@@ -82,6 +82,11 @@ def open_to_others(path: Path) -> bool:
     return status.st_uid != os.getuid() or bool(status.st_mode & 0o022)
 
 
+def model_path(given=None) -> Path:
+    """The body model file ``given`` (a path), or the default model's (`default_model_path`) where None."""
+    return Path(given) if given else default_model_path()
+
+
 def default_model_path() -> Path:
     """Path of ``SMPLX_NEUTRAL.npz`` of the default model, generated on first use and cached under
     ``$JAXMOCAP_CACHE`` (or ``~/.cache/jaxmocap``) in ``default_model/<generator id>/smplx/``; the folder two

@@ -95,7 +95,7 @@ def write_ledger(out_dir: Path, records: list[VideoRecord]) -> list[Path]:
 def video_key(config: RunConfig) -> dict:
     """What a video's outputs depend on, as JSON values: every option of ``config`` but ``progress``, its inputs by
     place and content (`config.chunk_key`) and the body model by its hash."""
-    model = Path(config.model) if config.model else smplx_jax.default_model_path()
+    model = smplx_jax.model_path(config.model)
     model_sha256 = file_sha256(model) if model.is_file() else f"missing {model}"
     at_the_end = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)
                   if f.metadata == AT_THE_END and f.name != "progress"}

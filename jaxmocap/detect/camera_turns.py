@@ -6,8 +6,8 @@ rotation, whatever the point's depth: a frame's rays ``b`` are ``R b_key`` of a 
 the keyframe itself (each frame's positions the guess for the next), so a still camera's turn stays zero and a
 turning one's does not drift between keyframes; the rotation is the best one (Kabsch) over the points that agree
 with the best of `TRIALS` pairs (RANSAC) to `AGREE_PX`. A new keyframe is taken where fewer than `KEEP_SHARE` of its
-points are still seen. A camera that also travels moves near points across far ones (parallax): the points' spread
-about the best rotation (``background_px``) says so; its travel is not modelled.
+points are still seen. A camera that also travels moves near points across far ones (parallax): the tracked points'
+median stray from the best rotation (``background_px``) says so; its travel is not modelled.
 """
 
 from typing import NamedTuple
@@ -114,6 +114,7 @@ class CameraTurns:
         return np.asarray(turns, np.float32).reshape(-1, 3), np.asarray(spread, np.float32)
 
     def _one(self, frame: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, float]:
+        """One frame's turn and the background's stray (`turns`)."""
         scale = min(1.0, MAX_SIDE / max(frame.shape[:2]))
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
         if scale < 1.0:
@@ -122,7 +123,7 @@ class CameraTurns:
         mask = background_mask(gray.shape, boxes, scale)
         if self.key is None:
             self.key = self._keyframe(gray, mask, self.last)
-            return self.last, np.nan
+            return self.last.copy(), np.nan
         key, spread = self.key, np.nan
         focal, centre = self.focal * scale, self.centre * scale
         seen = np.zeros(len(key.points), bool)

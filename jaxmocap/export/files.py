@@ -27,7 +27,7 @@ def is_hands_file(path) -> bool:
 def _model_path(source, recorded: str, model_path) -> Path:
     """The body model file ``source`` was made with: ``model_path``, or the default model when None (an error
     unless its sha256 is the one ``source`` recorded)."""
-    path = Path(model_path) if model_path else smplx_jax.default_model_path()
+    path = smplx_jax.model_path(model_path)
     if recorded and recorded != file_sha256(path):
         message = f"{source} was made with another body model file (sha256 {recorded[:12]}…) than {path}"
         if model_path is None:

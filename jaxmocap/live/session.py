@@ -129,7 +129,7 @@ class Session:
 
     def __init__(self, config: LiveConfig):
         self.config = config
-        model_path = Path(config.model) if config.model else smplx_jax.default_model_path()
+        model_path = smplx_jax.model_path(config.model)
         self.model = smplx_jax.load_model(model_path)
         self.sender = None if config.udp is None else UdpSender(config.udp)
         self.source = LiveSource(config.source, config.realtime, config.loops)

@@ -92,7 +92,7 @@ def fit_keypoint_folder(keypoints_dir, out_dir, *, model_path=None, iterations: 
         raise InputError(f"--focal-length must be positive, got {focal_length}")
     if image_size is not None and min(image_size) < 1:
         raise InputError(f"--image-size must be positive, got {image_size[0]} {image_size[1]}")
-    model_path = Path(model_path) if model_path else smplx_jax.default_model_path()
+    model_path = smplx_jax.model_path(model_path)
     model = smplx_jax.load_model(model_path)
     t = len(files)
     params = None

@@ -75,7 +75,7 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     if "bvh" in config.exports:
         raise InputError("--mode hands exports glTF only (--export gltf); BVH holds one skeleton")
     (out_dir / "keypoints").mkdir(parents=True, exist_ok=True)
-    model_path = Path(config.model) if config.model else smplx_jax.default_model_path()
+    model_path = smplx_jax.model_path(config.model)
     model, model_sha256 = smplx_jax.load_model(model_path), file_sha256(model_path)
     regression = None
     if config.weights is not None:

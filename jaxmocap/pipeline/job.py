@@ -72,7 +72,7 @@ class Inputs:
 
     @classmethod
     def open(cls, config: RunConfig) -> "Inputs":
-        model_path = Path(config.model) if config.model else smplx_jax.default_model_path()
+        model_path = smplx_jax.model_path(config.model)
         model = smplx_jax.load_model(model_path)
         regression = None if config.weights is None else Regression.load(
             config.weights, model, config.hand_boxes if config.mode == "whole" else None)
