@@ -175,12 +175,13 @@ def frames_alive_at_each_chunk(monkeypatch, job):
 
 @contextlib.contextmanager
 def programs_lowered():
-    """Within the block, a list with an entry for each program JAX lowers (none for a program it holds already)."""
+    """Within the block, a list with the name of each program JAX lowers (``jit(<function>)``; none for a program
+    it holds already), from `jax.monitoring`'s events."""
     lowered = []
 
     def count(event, seconds, **kwargs):
         if event == "/jax/core/compile/jaxpr_to_mlir_module_duration":
-            lowered.append(event)
+            lowered.append(kwargs.get("fun_name", "?"))
 
     jax.monitoring.register_event_duration_secs_listener(count)
     try:

@@ -84,6 +84,8 @@ def test_a_model_file_its_hands_and_keypoint_constants_lower_few_programs(tmp_pa
     (tmp_path / "smplx").mkdir()
     np.savez(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz", **random_model_arrays(seed=5))
     index = np.array([0, 4, 7, 60])  # a set no other test builds: its program is new to this process
+    # another set of as many: the few small programs that prepare any set's arguments, lowered before the block
+    keypoints.keypoint_model(smplx_jax.load_model(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz"), np.array([1, 5, 8, 61]))
     with programs_lowered() as lowered:
         model = smplx_jax.load_model(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz")
         smplx_jax.hand_model(model, "left")
