@@ -175,6 +175,13 @@ def _square_support(segments: Segments, lens, vertical: np.ndarray) -> tuple[flo
     return float(segments.lengths @ (level[:, best] | agree[:, 0])), int(level[:, best].sum())
 
 
+def images_vertical(images: list[np.ndarray], lens, near: Float[np.ndarray, "3"], long_side: float,
+                    fixed: bool = False) -> np.ndarray | None:
+    """The scene's vertical near ``near`` (unit, camera frame) from the edges of ``images`` of one camera
+    (`Segments.detect`, `scene_vertical` through ``lens``, its focal length ``fixed`` or searched), or None."""
+    return scene_vertical(Segments.detect(images), *lens, near, long_side, fixed=fixed)[0]
+
+
 def scene_vertical(segments: Segments, focal_length: float, principal_point, near: Float[np.ndarray, "3"],
                    long_side: float, fixed: bool = False) -> tuple[np.ndarray | None, float]:
     """``(vertical, focal_length)``: of the directions near ``near`` that most edges agree on (`families`, through

@@ -160,8 +160,7 @@ class Session:
         self.detector = Detector(static_image_mode=False, max_people=config.max_people, hands=hands,
                                  redetect_every=search_interval(self.source.fps), landmarks=landmarks)
         self.tracker = IdentityTracker()
-        self.world = LiveWorld(self.model, self.source.fps, self.lens, max(self.source.size),
-                               fixed=config.focal_length is not None)
+        self.world = LiveWorld(self.model, self.lens, max(self.source.size), fixed=config.focal_length is not None)
         self.recorder = None if config.record is None else Recorder(
             config.record, self.model, model_sha256, self.lens, self.source.fps, self.source.size, landmarks,
             world=self.world)

@@ -15,7 +15,7 @@ import numpy as np
 from jaxtyping import Bool, Float
 
 import smplx_jax
-from jaxmocap.detect.verticals import Segments, scene_vertical
+from jaxmocap.detect.verticals import images_vertical
 from jaxmocap.integrate.clip import FOOT_JOINTS
 from jaxmocap.integrate.ground import (
     CONTACT_HEIGHT_M,
@@ -48,12 +48,13 @@ class WorldKeys(NamedTuple):
 
 
 class LiveWorld:
-    """The world frame of a live session of a still camera at ``fps`` frames/s through ``lens`` (its focal length
-    ``fixed`` where the user gave it) on frames of ``long_side`` pixels (module docstring): each frame's solved
-    bodies in it (`keys`); ``floor`` and ``camera_from_world`` once found (None before)."""
+    """The world frame of a live session of a still camera through ``lens`` (its focal length ``fixed`` where the
+    user gave it) on frames of ``long_side`` pixels (module docstring): each frame's solved bodies in it (`keys`);
+    ``floor`` and ``camera_from_world`` once found (None before). The frame rate of its first second is the one it
+    was solved at (frames may have been dropped)."""
 
-    def __init__(self, model: smplx_jax.BodyModel, fps: float, lens, long_side: float, fixed: bool = False):
-        self.model, self.fps, self.lens, self.long_side, self.fixed = model, fps, lens, long_side, fixed
+    def __init__(self, model: smplx_jax.BodyModel, lens, long_side: float, fixed: bool = False):
+        self.model, self.lens, self.long_side, self.fixed = model, lens, long_side, fixed
         self.floor: Floor | None = None
         self.camera_from_world: Float[np.ndarray, "4 4"] | None = None
         self.early: list[tuple[float, dict[int, Solved]]] = []  # the frames since someone was first seen
@@ -134,9 +135,8 @@ class LiveWorld:
             params = jax.tree.map(lambda *a: np.stack([np.asarray(x, np.float32) for x in a]),
                                   *(absent if s is None else s.params for s in rows))
             people[person] = (params, np.asarray([s is not None for s in rows]))
-        segments = Segments.detect([image for _, image in images])
-        ground = standing(self.model, people, fps, lambda near: scene_vertical(
-            segments, *self.lens, near, self.long_side, fixed=self.fixed)[0])
+        ground = standing(self.model, people, fps, lambda near: images_vertical(
+            [image for _, image in images], self.lens, near, self.long_side, self.fixed))
         main = max(people, key=lambda i: (people[i][1].sum(), -i))
         params, valid = people[main]
         first = int(np.argmax(valid))

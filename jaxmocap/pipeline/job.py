@@ -25,7 +25,7 @@ from jaxmocap.detect.camera_turns import CameraTurns, camera_motion
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import available_landmarks
-from jaxmocap.detect.verticals import AGREE_RAD, Segments, scene_vertical
+from jaxmocap.detect.verticals import AGREE_RAD, images_vertical
 from jaxmocap.frame_source import Media, open_media, sample_frames
 from jaxmocap.integrate.ground import standing, world_arrays
 from jaxmocap.io import file_sha256
@@ -170,9 +170,8 @@ def _scene_up(config: RunConfig, inputs: Inputs, chunks: list[Chunk], near: np.n
         groups = [(images, turn[0])]
     else:
         groups = [([image], r) for image, r in zip(images, turn)]
-    found = [r @ v for images, r in groups if (v := scene_vertical(
-        Segments.detect(images), *inputs.lens, r.T @ near, max(inputs.media.size),
-        fixed=config.focal_length is not None)[0]) is not None]
+    found = [r @ v for images, r in groups if (v := images_vertical(
+        images, inputs.lens, r.T @ near, max(inputs.media.size), config.focal_length is not None)) is not None]
     return np.mean(found, 0) / np.linalg.norm(np.mean(found, 0)) if found else None
 
 
