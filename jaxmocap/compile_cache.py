@@ -133,7 +133,7 @@ class _DiskJit:
 def _avals_and_platform(leaves) -> tuple[tuple, str | None]:
     """Each leaf's shape, dtype and weak type, and the platform the call runs on: that of the device its committed
     arrays are on, else JAX's default; None under a transformation (tracers) or across devices. One pass, reading
-    attributes (the live solve's 116 leaves: 0.2 ms, against 0.7 ms through ``jnp.result_type``, every frame)."""
+    attributes (a fraction of what ``jnp.result_type`` per leaf costs: it runs on every live frame)."""
     avals, devices = [], set()
     for x in leaves:
         if isinstance(x, jax.core.Tracer):

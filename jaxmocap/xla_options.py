@@ -10,10 +10,9 @@ know), and never over the user's own choice in ``XLA_FLAGS``.
 
 jaxlib's LAPACK kernels on the CPU (the dense fit's Cholesky factorisations, `jnp.linalg`) run on scipy's OpenBLAS,
 which jaxlib loads at its first such call. OpenBLAS's threads spin while they wait for work: two processes on two
-cores (`jaxmocap batch --workers 2`, pytest's two workers) then fight over them, and 20 float64 fits of a frame took
-140 s each side instead of 3 s; alone, one thread is faster on matrices of the fit's size (178 x 178: `fit` at
-the defaults 10.0 frames/s on one thread, 8.9 on two). So ``OPENBLAS_NUM_THREADS=1``, unless the user set it
-(docs/BENCHMARKS.md, "LAPACK's threads")."""
+cores (`jaxmocap batch --workers 2`, pytest's two workers) then fight over them, each many times slower than
+alone; and alone, one thread is faster on matrices of the fit's size (178 x 178). So ``OPENBLAS_NUM_THREADS=1``,
+unless the user set it (docs/BENCHMARKS.md, "LAPACK's threads")."""
 
 import os
 import re

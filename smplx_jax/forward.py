@@ -4,8 +4,8 @@ The computation is the ``smplx`` package's: shape blend shapes, joints regressed
 (precomputed as joint templates plus joint shape directions), pose blend shapes, a rigid kinematic chain and
 linear blend skinning; then vertex joints and face landmarks, and ``transl`` last. Batch with ``jax.vmap``.
 
-The three public functions are jitted: called eagerly, each runs one program compiled once per shape (a batch of 8
-bodies: 0.7 s to compile, then 3 ms), not its hundred operations one by one (1.9 s the first time, 20 ms after).
+The three public functions are jitted: called eagerly, each runs one program compiled once per shape, not its
+hundred operations one by one (slower both the first time and after: docs/BENCHMARKS.md, "Body model").
 Inside a caller's ``jit``, ``vmap`` or ``grad`` they are traced as any function is.
 """
 

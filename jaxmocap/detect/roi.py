@@ -96,8 +96,8 @@ def crop(image: np.ndarray, rect: Rect | None, size: int, value_range: tuple[flo
 def warp_perspective(image: np.ndarray, matrix: np.ndarray, size: int, border_zero: bool) -> np.ndarray:
     """``cv2.warpPerspective(image, matrix, (size, size), INTER_LINEAR)`` as OpenCV 4 and mediapipe's own build
     compute it: each output pixel's source position in double, rounded to 1/32 pixel, then `cv2.remap`'s
-    fixed-point bilinear sampling. OpenCV 5's warp differs from it by up to 3 levels in 2% of the pixels, and
-    BlazePose's landmarks follow such differences by 1-16 px (docs/BENCHMARKS.md, "Detector")."""
+    fixed-point bilinear sampling. OpenCV 5's warp differs from it by a few levels in some pixels, and BlazePose's
+    landmarks follow such differences by whole pixels (docs/BENCHMARKS.md, "Detector")."""
     _, m = cv2.invert(np.asarray(matrix, np.float64), flags=cv2.DECOMP_LU)  # OpenCV's own 3x3 inverse
     x = np.arange(size, dtype=np.float64)
     with np.errstate(divide="ignore"):

@@ -37,9 +37,8 @@ from smplx_jax import BodyModel, SMPLXParams, constants
 
 BUCKETS = (1, 8, 32, 64)  # padded batch sizes; longer inputs run in chunks of 64 (faster here than 1024: cache)
 MIN_KEYPOINTS = 3  # fewer visible keypoints: the frame has no person to fit
-# The default cap on steps: frames converge in 43-82 steps (median), 140-254 (99th percentile), float32 and float64
-# alike, real and synthetic starts (bench/convergence.py); of its synthetic sets 99.6-100% converge within it in
-# float64, 99.7-100% in float32, the rest stopped at float32's floor (docs/BENCHMARKS.md, "The default step cap").
+# The default cap on steps: well above the steps frames take to converge in float32 and float64, from real and
+# synthetic starts (bench/convergence.py; docs/BENCHMARKS.md, "The default step cap").
 ITERATIONS = 400
 ROUND_STEPS = 50  # `fit` steps its frames in rounds of at most this many (`_solve_frames`)
 SOLVE_FRAMES = 1024  # `fit` solves at most this many frames at a time (their solver states are held in memory)
@@ -95,8 +94,8 @@ def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: Fit
     (1 / focal length, principal point), 1 / focal length 0 for weak perspective; ``free`` (55,) 1 for the joints
     fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`;
     ``differentiable`` False: the same fit without a way for gradients through it (`levenberg_marquardt.run`).
-    Matrix products in full float32 on every device: a GPU's default TF32 ends the fit 0.3 px worse (on an H100,
-    at the same speed; docs/BENCHMARKS.md)."""
+    Matrix products in full float32 on every device: a GPU's default TF32 ends the fit worse at the same speed
+    (docs/BENCHMARKS.md, "On a GPU")."""
     if adjoint is not None and not differentiable:
         raise ValueError("adjoint is for a differentiable fit: fit_one(differentiable=False) takes none")
     with jax.default_matmul_precision("highest"):

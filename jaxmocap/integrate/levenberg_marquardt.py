@@ -348,7 +348,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             before, after = bend_of(pose_and_shape(y, args)[0]), bend_of(pose_and_shape(trial, args)[0])
             stiff = jnp.where(accept, state.stiff & (after > -BEND_MARGIN) & (after >= before),
                               state.stiff | ((before <= 0) & (after > 0)))
-        else:  # the pipeline's few CG steps hold no limit's stiffness (no better on the real views with it)
+        else:  # the pipeline's few CG steps hold no limit's stiffness
             last_step, last_gradient, stiff = state.last_step, state.last_gradient, state.stiff
         restart = (damping >= MAX_DAMPING) & ~state.restarted
         new = _State(jnp.where(accept, cost, state.cost), jnp.where(restart, 1.0, jnp.minimum(damping, MAX_DAMPING)),
@@ -370,7 +370,7 @@ def stalled(state: _State) -> Bool[Array | np.ndarray, "*frames"]:
     """Whether refused steps have raised the damping to `MAX_DAMPING` a second time. The first time, the solve
     starts again at damping 1 without ``S``: each refused step halves ``S`` but multiplies the damping by a growing
     factor, so by the time ``S`` no longer misleads, the damping has run past every step that would lower the cost
-    (20 of bench/fit.py's 1024 float32 frames stopped there, all 20 converge after it; docs/BENCHMARKS.md). The
+    (docs/BENCHMARKS.md, "Optimization integration"). The
     second time, no step however short lowers the cost (its steps are some 1e-10 of a gradient step, below the
     cost's resolution in float32), and the solve stops, not converged, as at its step cap."""
     return state.damping >= MAX_DAMPING

@@ -103,8 +103,8 @@ def fresh_state(num_betas: int) -> PersonState:
 
 def host() -> jax.Device:
     """Where the live path solves: the host's CPU, also beside a GPU. One frame's solve is a few hundred small
-    operations in short loops, bound by each operation's launch, not its work: on an H200 machine a frame took
-    36 ms on the GPU and 12 ms on its CPU (docs/BENCHMARKS.md, "Live")."""
+    operations in short loops, bound by each operation's launch, not its work, which a GPU's launches make slower
+    than its host's CPU (docs/BENCHMARKS.md, "Live")."""
     return jax.devices("cpu")[0]
 
 
