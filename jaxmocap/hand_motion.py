@@ -18,9 +18,9 @@ import smplx_jax
 from jaxmocap.batching import map_in_buckets
 from jaxmocap.errors import InputError
 from jaxmocap.io import read_result_npz, write_result_npz
+from smplx_jax import SIDES
 from smplx_jax.rotations import rotvec_to_rotmat
 
-SIDES = ("left", "right")
 HAND_SHAPES = {"global_orient": (3,), "hand_pose": (15, 3), "camera_scale": (), "camera_trans": (2,), "valid": (),
                "keypoints_2d": (21, 3), "reprojection_error_px": ()}  # after the frame axis
 META = ("fps", "image_size", "model_sha256")

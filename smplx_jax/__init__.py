@@ -11,6 +11,7 @@ from smplx_jax.hand import HandModel, HandOutput, hand_forward, hand_model
 from smplx_jax.model import BodyModel, load_model
 from smplx_jax.model_file import ModelFileError, ModelNotFoundError
 from smplx_jax.params import (
+    SIDES,
     SMPLXParams,
     hand_pose_from_pca,
     hand_pose_from_relative,
@@ -19,7 +20,7 @@ from smplx_jax.params import (
 )
 
 __all__ = [
-    "BodyModel", "HandModel", "HandOutput", "ModelFileError", "ModelNotFoundError", "Output", "SMPLXParams",
+    "SIDES", "BodyModel", "HandModel", "HandOutput", "ModelFileError", "ModelNotFoundError", "Output", "SMPLXParams",
     "Skeleton", "constants", "default_model_path", "forward", "forward_joints", "hand_forward", "hand_model",
     "hand_pose_from_pca", "hand_pose_from_relative", "hand_pose_to_pca", "hand_pose_to_relative", "load_model",
     "model_path", "posed_skeleton", "rotations", "write_default_model",

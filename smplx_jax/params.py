@@ -9,7 +9,7 @@ from jaxtyping import Array, ArrayLike, Float
 from smplx_jax.pytree import pytree_dataclass
 
 Side = Literal["left", "right"]
-_SIDE_INDEX = {"left": 0, "right": 1}
+SIDES: tuple[Side, Side] = ("left", "right")  # in the order of every pair of per-side arrays
 
 
 @pytree_dataclass
@@ -54,25 +54,25 @@ class SMPLXParams:
 def hand_pose_from_relative(model, relative_pose: Float[ArrayLike, "*batch 15 3"], side: Side
                             ) -> Float[Array, "*batch 15 3"]:
     """Absolute hand pose from one relative to the model's mean hand (``flat_hand_mean=False``)."""
-    return relative_pose + model.hand_mean[_SIDE_INDEX[side]].reshape(15, 3)
+    return relative_pose + model.hand_mean[SIDES.index(side)].reshape(15, 3)
 
 
 def hand_pose_to_relative(model, hand_pose: Float[ArrayLike, "*batch 15 3"], side: Side
                           ) -> Float[Array, "*batch 15 3"]:
     """The hand pose relative to the model's mean hand."""
-    return hand_pose - model.hand_mean[_SIDE_INDEX[side]].reshape(15, 3)
+    return hand_pose - model.hand_mean[SIDES.index(side)].reshape(15, 3)
 
 
 def hand_pose_from_pca(model, pca_coeffs: Float[Array, "n"], side: Side) -> Float[Array, "15 3"]:
     """Absolute hand pose ``mean + coeffs @ components[:n]``, as the ``smplx`` package computes it with
     ``use_pca=True, flat_hand_mean=False``. Its ``flat_hand_mean=True`` variant (no mean) is
     `hand_pose_to_relative` of this."""
-    components = model.hand_components[_SIDE_INDEX[side], : pca_coeffs.shape[0]]
+    components = model.hand_components[SIDES.index(side), : pca_coeffs.shape[0]]
     return hand_pose_from_relative(model, (pca_coeffs @ components).reshape(15, 3), side)
 
 
 def hand_pose_to_pca(model, hand_pose: Float[Array, "15 3"], side: Side, num_coeffs: int) -> Float[Array, "n"]:
     """Least-squares PCA coefficients of an absolute hand pose (exact when the pose lies in the span)."""
-    components = model.hand_components[_SIDE_INDEX[side], :num_coeffs]
+    components = model.hand_components[SIDES.index(side), :num_coeffs]
     relative = hand_pose_to_relative(model, hand_pose, side).reshape(45)
     return jnp.linalg.lstsq(components.T, relative)[0]

@@ -12,8 +12,9 @@ from conftest import load
 from gltf_util import read_glb, sampled, skinned_vertices
 from jaxmocap.export import write_hands_gltf
 from jaxmocap.export.animation import CAMERA_TO_WORLD
-from jaxmocap.hand_motion import SIDES, hand_meshes, write_hands
+from jaxmocap.hand_motion import hand_meshes, write_hands
 from jaxmocap.io import file_sha256
+from smplx_jax import SIDES
 from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
 T, FPS, SIZE, FOCAL = 6, 30.0, (640.0, 480.0), 900.0

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from jaxmocap.detect.assignment import gated_pairs
 from jaxmocap.detect.identities import IdentityTracker
 
 SKELETON = np.random.default_rng(0).uniform([-40, -90], [40, 90], (33, 2))  # a person 180 px tall about its centre
@@ -89,3 +90,21 @@ def test_a_track_is_as_large_as_its_person_lying_or_standing():
     tracker = IdentityTracker()
     ids = [tracker((lying + (10 * (-1) ** t, 10 * (-1) ** (t // 2), 0))[None], LOOKS[:1])[0] for t in range(10)]
     assert ids == [0] * 10
+
+
+def test_people_who_step_the_same_way_both_keep_their_ids():
+    """Two people 50 px apart both step left, 45 and 30 px: the second lands nearest the first's old place. The
+    pairing that keeps both (each within its gate) wins over the single nearest pair, which would leave the first
+    person unmatched and new."""
+    tracker, rng = IdentityTracker(), np.random.default_rng(7)
+    blank = np.zeros((2, 72), np.float32)
+    assert frame_ids(tracker, rng, [(300, 300), (350, 300)], blank) == [0, 1]
+    assert frame_ids(tracker, rng, [(255, 300), (320, 300)], blank) == [0, 1]
+
+
+def test_gated_pairs_pair_the_most_then_the_cheapest():
+    inf = np.inf
+    assert gated_pairs(np.array([[0.1, 0.2], [0.25, inf]])) == [(0, 1), (1, 0)]
+    assert gated_pairs(np.array([[0.1, 0.2], [0.3, 0.1]])) == [(0, 0), (1, 1)]
+    assert gated_pairs(np.array([[inf, inf], [inf, 5.0]])) == [(1, 1)]
+    assert gated_pairs(np.full((2, 3), inf)) == [] and gated_pairs(np.zeros((0, 2))) == []

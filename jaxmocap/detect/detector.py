@@ -8,6 +8,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from smplx_jax import SIDES
+
+from .assignment import gated_pairs
 from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models, landmark_model_path
@@ -15,16 +18,17 @@ from .pose import PoseEstimator, PoseResult, landmark_box, overlap, rect_extent,
 from .roi import Rect, normalize_radians
 from .ssd import Detection, in_image, square_tiles
 
-SIDES = ("left", "right")
 SEARCH_SECONDS = 0.2  # while fewer than max_people are tracked, the person detector looks for more this often
 BONES = np.array([(11, 13), (13, 15), (12, 14), (14, 16), (11, 12), (23, 24), (11, 23), (12, 24), (23, 25),
                   (25, 27), (24, 26), (26, 28), (0, 11), (0, 12)])  # BlazePose landmarks: arms, torso, legs, head
 CONFIRM_FRAMES = 2  # a person found beside others is reported once tracked in this many frames
 # a person detection on which the landmark model's presence is below min_tracking_confidence but at least this
-# (someone cut by the frame's edge: 0.03-0.9 on the two-person take's cropped view, swinging from frame to frame)
+# (someone cut by the frame's edge, whose presence swings across that range from frame to frame)
 # starts a burst of searches, as a lost track does (`Detector`)
 DOUBTFUL_PRESENCE = 0.1
 UPSIDE_DOWN = 0.75 * math.pi  # a detection turned more than this (radians) is tried upright too
+# a hand belongs to a body's wrist within this many of its palm lengths (wrist to middle knuckle: a hand's reach)
+MAX_WRIST_PALMS = 2.0
 
 
 def search_interval(fps: float | None) -> int:
@@ -268,7 +272,7 @@ class Detector:
         return float(np.linalg.norm(hand_wrist - wrist) / palm + 0.25 * (1.0 - p_side))
 
     def _plausible(self, hand: HandResult, pose: PoseResult, side: str, size) -> bool:
-        return self._wrist_cost(hand, pose, side, size) < 2.0
+        return self._wrist_cost(hand, pose, side, size) < MAX_WRIST_PALMS
 
     def _assign_palms(self, image: np.ndarray, tracks: list[_Track]) -> None:
         size = (image.shape[1], image.shape[0])
@@ -276,14 +280,12 @@ class Detector:
         hands = [self._hands.landmarks(image, self._hands.detection_roi(d, size), self.min_tracking_confidence)
                  for d in palms]
         hands = [h for h in hands if h is not None]
-        pairs = sorted((self._wrist_cost(h, t.pose, s, size), i, k, s)
-                       for i, h in enumerate(hands) for k, t in enumerate(tracks) for s in SIDES)
-        used = set()
-        for cost, i, k, side in pairs:
-            if cost >= 2.0 or i in used or tracks[k].hands[side] is not None:
-                continue
-            tracks[k].hands[side] = hands[i]
-            used.add(i)
+        free = [(t, side) for t in tracks for side in SIDES if t.hands[side] is None]
+        cost = np.array([[self._wrist_cost(h, t.pose, side, size) for t, side in free] for h in hands]).reshape(
+            len(hands), len(free))
+        for i, j in gated_pairs(np.where(cost < MAX_WRIST_PALMS, cost, np.inf)):
+            track, side = free[j]
+            track.hands[side] = hands[i]
 
     def _update_hands(self, image: np.ndarray, tracks: list[_Track]) -> None:
         if self.static_image_mode:

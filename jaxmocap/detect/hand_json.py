@@ -8,8 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+from smplx_jax import SIDES
+
 from .detector import search_interval
-from .hand_tracker import SIDES, Hand, HandTracker
+from .hand_tracker import Hand, HandTracker
 from .json_output import write_detections
 
 

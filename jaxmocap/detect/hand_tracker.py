@@ -10,13 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from smplx_jax import SIDES
+
 from .detector import as_bgr
 from .hands import MIN_PALM_SCORE, MIN_PRESENCE, HandEstimator, HandResult
 from .models import ensure_models
 from .pose import rect_iou
 from .roi import Rect
-
-SIDES = ("left", "right")
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .assignment import gated_pairs
+
 TORSO = (11, 12, 23, 24)  # BlazePose shoulders and hips
 HISTOGRAM_BINS = (12, 6)  # hue, saturation
 APPEARANCE_SIZE = HISTOGRAM_BINS[0] * HISTOGRAM_BINS[1]
@@ -79,8 +81,9 @@ class IdentityTracker:
     identity: its landmark model follows them however their landmarks jump (a person cut by the frame's edge, whom
     it lays down in one frame and stands up in the next). Any other person matches the track whose expected
     landmarks lie within ``gate`` sizes (widening with the frames it was unseen) and whose look is within
-    ``max_appearance``; among candidates the cheapest pairs go first (distance + look). ``state``/``restore``
-    carry the tracks over (e.g. between the chunks of a resumable run)."""
+    ``max_appearance``; of those pairs, the ones that match the most people, and among them the least total cost
+    (distance + look; `assignment.gated_pairs`). ``state``/``restore`` carry the tracks over (e.g. between the
+    chunks of a resumable run)."""
 
     def __init__(self, max_gap: int = 60, gate: float = 0.35, gate_per_frame: float = 0.05,
                  max_appearance: float = 0.6):
@@ -95,19 +98,21 @@ class IdentityTracker:
         live = [t for t in self.tracks if frame - t.last_seen <= self.max_gap]
         sources = [-1] * len(landmarks) if sources is None else list(sources)
         followed = {t.source: k for k, t in enumerate(live) if t.source >= 0 and t.last_seen == frame - 1}
-        pairs = [(-1.0, p, followed[s]) for p, s in enumerate(sources) if s in followed]
-        for p, (lm, look) in enumerate(zip(landmarks, appearances)):
-            for k, track in enumerate(live):
-                gap = frame - track.last_seen
-                moved = landmark_distance(track, lm, frame)
-                differs = appearance_distance(track.appearance, look)
+        pairs = {p: followed[s] for p, s in enumerate(sources) if s in followed}
+        rows = [p for p in range(len(landmarks)) if p not in pairs]
+        columns = [k for k in range(len(live)) if k not in pairs.values()]
+        cost = np.full((len(rows), len(columns)), np.inf)
+        for i, p in enumerate(rows):
+            for j, k in enumerate(columns):
+                gap = frame - live[k].last_seen
+                moved = landmark_distance(live[k], landmarks[p], frame)
+                differs = appearance_distance(live[k].appearance, appearances[p])
                 if moved <= self.gate + self.gate_per_frame * (gap - 1) and differs <= self.max_appearance:
-                    pairs.append((moved + differs, p, k))
-        ids, used = [None] * len(landmarks), set()
-        for _, p, k in sorted(pairs):
-            if ids[p] is None and k not in used:
-                ids[p], live[k] = live[k].id, _updated(live[k], landmarks[p], appearances[p], frame, sources[p])
-                used.add(k)
+                    cost[i, j] = moved + differs
+        pairs |= {rows[i]: columns[j] for i, j in gated_pairs(cost)}
+        ids = [None] * len(landmarks)
+        for p, k in pairs.items():
+            ids[p], live[k] = live[k].id, _updated(live[k], landmarks[p], appearances[p], frame, sources[p])
         for p in range(len(landmarks)):
             if ids[p] is None:
                 ids[p] = self.next_id

@@ -15,7 +15,7 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.motion import lens, motion_params
-from smplx_jax import constants
+from smplx_jax import SIDES, constants
 from smplx_jax.rotations import rotvec_to_rotmat
 
 CAMERA_TO_WORLD = np.diag([1.0, -1.0, -1.0])
@@ -29,10 +29,10 @@ _VERTEX_JOINT = {name: constants.NUM_JOINTS + k for k, name in enumerate(constan
 LEAF_TIPS = {
     "jaw": (_LOWER_LIP,),
     **{f"{side}_foot": (_VERTEX_JOINT[f"{side}_big_toe"], _VERTEX_JOINT[f"{side}_small_toe"])
-       for side in ("left", "right")},
-    **{f"{side}_eye": (_VERTEX_JOINT[f"{side}_eye_vertex"],) for side in ("left", "right")},
+       for side in SIDES},
+    **{f"{side}_eye": (_VERTEX_JOINT[f"{side}_eye_vertex"],) for side in SIDES},
     **{f"{side}_{finger}3": (_VERTEX_JOINT[f"{side}_{finger}_tip"],)
-       for side in ("left", "right") for finger in ("thumb", "index", "middle", "ring", "pinky")},
+       for side in SIDES for finger in ("thumb", "index", "middle", "ring", "pinky")},
 }
 MIN_BONE_LENGTH = 0.005  # metres; a leaf whose tip is nearer than this continues its parent's bone instead
 

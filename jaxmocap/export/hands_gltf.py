@@ -12,8 +12,7 @@ import smplx_jax
 from jaxmocap.errors import InputError
 from jaxmocap.export.animation import CAMERA_TO_WORLD, Animation, end_sites, held_frames, weak_perspective_origin
 from jaxmocap.export.gltf import SkinnedMesh, write_meshes
-from jaxmocap.hand_motion import SIDES
-from smplx_jax import constants
+from smplx_jax import SIDES, constants
 from smplx_jax.rotations import rotvec_to_rotmat
 
 HAND_JOINTS = {"left": (constants.LEFT_WRIST,) + constants.LEFT_HAND_JOINTS,

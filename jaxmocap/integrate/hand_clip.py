@@ -40,7 +40,7 @@ from jaxmocap.integrate.clip_solver import ClipLevenbergMarquardt, Step
 from jaxmocap.integrate.hand_fit import hand_keypoint_model, side_indices
 from jaxmocap.integrate.keypoints import KeypointModel, keypoints_cm
 from jaxmocap.integrate.least_squares import bend_of, log1p_ratio
-from smplx_jax import BodyModel
+from smplx_jax import SIDES, BodyModel
 
 JOINTS = 16  # the wrist, then the 15 finger joints in SMPL-X's order
 UNKNOWNS = 3 * JOINTS + 3  # a frame's: the rotations' increments, then the camera's
@@ -319,7 +319,7 @@ def fit_hand_clip(model: BodyModel, side: str, keypoints: Float[ArrayLike, "T 21
     keypoint's detector noise; ``directions`` and ``direction_weight``: the observed unit direction of each of
     `clip.HAND_BONES` in the camera's axes and its confidence; ``found`` where the hand is (default: where any
     keypoint is). Pure: works under `jax.jit` and `jax.grad` (implicit differentiation of the optimum)."""
-    if side not in ("left", "right"):
+    if side not in SIDES:
         raise ValueError(f"side must be 'left' or 'right', got {side!r}")
     data = hand_clip_problem(model, side, keypoints, start, focal_length=focal_length,
                              principal_point=principal_point, fps=fps, keypoint_sigma_px=keypoint_sigma_px,

@@ -18,7 +18,7 @@ from jaxtyping import Array, Bool, Float
 import smplx_jax
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.detect.detector import search_interval
-from jaxmocap.detect.hand_tracker import SIDES, Hand, HandTracker
+from jaxmocap.detect.hand_tracker import Hand, HandTracker
 from jaxmocap.hand_motion import hand_meshes
 from jaxmocap.integrate.clip import ClipConfig
 from jaxmocap.integrate.hand_clip import HAND_CLIP, hand_clip_problem, hand_clip_start, solve_hand_clip
@@ -34,6 +34,7 @@ from jaxmocap.overlay import Posed
 from jaxmocap.pipeline.hands_job import COLUMNS, FIT_COLUMNS, side_arrays
 from jaxmocap.pipeline.stages import Lens, lens_of
 from jaxmocap.pipeline.whole_clip import hand_bone_directions, part_noise_px
+from smplx_jax import SIDES
 
 
 @dataclass(frozen=True)

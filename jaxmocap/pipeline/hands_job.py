@@ -22,7 +22,7 @@ import smplx_jax
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.hand_json import hands_openpose
-from jaxmocap.detect.hand_tracker import SIDES, HandTracker
+from jaxmocap.detect.hand_tracker import HandTracker
 from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import open_media
@@ -37,6 +37,7 @@ from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import lens_of
 from jaxmocap.pipeline.whole_clip import hand_bone_directions, part_noise_px, window_spans
+from smplx_jax import SIDES
 
 SETTINGS_VERSION = 1  # of the stored chunks
 

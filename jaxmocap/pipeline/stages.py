@@ -50,7 +50,7 @@ def initial_poses(model: smplx_jax.BodyModel, obs: Observations) -> smplx_jax.SM
     translation; a hand seen in none of the frames, as with ``--mode body``, is left as the body IK starts it:
     flat)."""
     theta, betas, _, _ = body_from_blazepose(model, obs.body_world)
-    for side, name in enumerate(("left", "right")):
+    for side, name in enumerate(smplx_jax.SIDES):
         if not np.any(obs.hands_conf[:, side] > 0):
             continue  # the IK would keep every frame as it is (too few targets)
         conf = np.repeat(obs.hands_conf[:, side:side + 1] > 0, 21, axis=1).astype(np.float32)
