@@ -144,14 +144,17 @@ def interrupted_at_chunk(monkeypatch, index: int, stop=_ctrl_c):
 
 
 @contextlib.contextmanager
-def frames_alive_at_each_chunk(monkeypatch, job):
-    """Within the block, a list with, as ``job`` (`pipeline.job` or `pipeline.hands_job`) starts reading each chunk
-    of frames, how many of the previous chunk's frames are still held anywhere (weak references, after a
-    collection): a run must hold one chunk of decoded frames at a time."""
+def frames_alive_at_each_chunk(monkeypatch):
+    """Within the block, a list with, as a run (`pipeline.job` or `pipeline.hands_job`, both through
+    `pipeline.chunks.stored_or_solved`) starts reading each chunk of frames, how many of the previous chunk's
+    frames are still held anywhere (weak references, after a collection): a run must hold one chunk of decoded
+    frames at a time."""
     import gc
     import weakref
 
-    batches, alive, previous = job.frame_batches, [], []
+    from jaxmocap.pipeline import chunks
+
+    batches, alive, previous = chunks.frame_batches, [], []
 
     def watched(frames, size, chrono):
         def counted():
@@ -166,11 +169,11 @@ def frames_alive_at_each_chunk(monkeypatch, job):
 
         return batches(counted(), size, chrono)
 
-    monkeypatch.setattr(job, "frame_batches", watched)
+    monkeypatch.setattr(chunks, "frame_batches", watched)
     try:
         yield alive
     finally:
-        monkeypatch.setattr(job, "frame_batches", batches)
+        monkeypatch.setattr(chunks, "frame_batches", batches)
 
 
 @contextlib.contextmanager

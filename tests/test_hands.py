@@ -165,9 +165,7 @@ def test_close_up_video_is_tracked_and_fitted_within_3_percent(video):
 def test_a_hands_run_lets_a_chunks_frames_go_before_the_next_are_read(tmp_path, monkeypatch):
     """As the body's run (tests/test_pipeline.py): one chunk of decoded frames at a time. One frame of the
     previous chunk is still held here (which holder was not traced); a chunk's worth is what matters."""
-    import jaxmocap.pipeline.hands_job as job
-
-    with frames_alive_at_each_chunk(monkeypatch, job) as alive:
+    with frames_alive_at_each_chunk(monkeypatch) as alive:
         run(RunConfig(CLIP, mode="hands", end=32, chunk_size=16, progress=False, overlay=False), tmp_path)
     assert len(alive) == 2 and max(alive) <= 1, alive
 

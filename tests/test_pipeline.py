@@ -324,7 +324,7 @@ def test_the_motion_does_not_depend_on_the_chunks(result, tmp_path):
 def test_a_chunks_frames_are_let_go_before_the_next_are_read(tmp_path, monkeypatch):
     """A run holds one chunk of decoded frames at a time (128 frames of 1080p video are 800 MB), so that a long
     video's peak memory is that of a few chunks."""
-    with frames_alive_at_each_chunk(monkeypatch, pipeline_job) as alive:
+    with frames_alive_at_each_chunk(monkeypatch) as alive:
         run(CLIP, tmp_path, start=20, end=20 + FRAMES, chunk_size=CHUNK, overlay=False, progress=False)
     assert alive == [0, 0], alive
 

@@ -17,6 +17,7 @@ from .models import ensure_models, landmark_model_path
 from .pose import PoseEstimator, PoseResult, landmark_box, overlap, rect_extent, rect_iou
 from .roi import Rect, normalize_radians
 from .ssd import Detection, in_image, square_tiles
+from .track_state import result_of, results_state
 
 SEARCH_SECONDS = 0.2  # while fewer than max_people are tracked, the person detector looks for more this often
 BONES = np.array([(11, 13), (13, 15), (12, 14), (14, 16), (11, 12), (23, 24), (11, 23), (12, 24), (23, 25),
@@ -147,23 +148,15 @@ class Detector:
                "hand_found": np.asarray(
             [[h is not None for h in pair] for pair in hands], bool).reshape(-1, 2),
                "searches_left": np.asarray(self._searches_left)}
-        for kind, results, empty in (("pose", [t.pose for t in self._tracks], None),
-                                     ("hand", [h for pair in hands for h in pair], _NO_HAND)):
-            for name in (PoseResult if kind == "pose" else HandResult)._fields:
-                values = [np.asarray(getattr(r or empty, name), np.float64) for r in results]  # all float64
-                out[f"{kind}_{name}"] = np.asarray(values) if values else np.zeros((0,))
-        return out
+        return out | results_state("pose", PoseResult, [t.pose for t in self._tracks]) | results_state(
+            "hand", HandResult, [h for pair in hands for h in pair], _NO_HAND)
 
     def restore(self, state: dict[str, np.ndarray]) -> None:
         """Continue from a `state`."""
-        def result(kind, cls, i):
-            fields = {name: state[f"{kind}_{name}"][i] for name in cls._fields}
-            return cls(**{name: Rect(*map(float, v)) if name.endswith("roi") else v if v.ndim else float(v)
-                          for name, v in fields.items()})
-
         found = state["hand_found"]
-        self._tracks = [_Track(result("pose", PoseResult, k), {
-            side: result("hand", HandResult, 2 * k + j) if found[k, j] else None for j, side in enumerate(SIDES)},
+        self._tracks = [_Track(result_of(state, "pose", PoseResult, k), {
+            side: result_of(state, "hand", HandResult, 2 * k + j) if found[k, j] else None
+            for j, side in enumerate(SIDES)},
             int(state["seen"][k]), int(state["number"][k])) for k in range(len(found))]
         self._searches_left = int(state["searches_left"])
         self._frame, self._started = int(state["frame"]), int(state["started"])

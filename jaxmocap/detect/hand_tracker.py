@@ -16,7 +16,7 @@ from .detector import as_bgr
 from .hands import MIN_PALM_SCORE, MIN_PRESENCE, HandEstimator, HandResult
 from .models import ensure_models
 from .pose import rect_iou
-from .roi import Rect
+from .track_state import result_of, results_state
 
 
 @dataclass(frozen=True)
@@ -95,20 +95,13 @@ class HandTracker:
                "tracked": np.asarray(len(self._tracks))}
         for name in ("hand_id", "right_total", "frames", "last_seen"):
             out[name] = np.asarray([getattr(t, name) for t in tracks], np.float64)
-        for name in HandResult._fields:
-            values = [np.asarray(getattr(t.result, name), np.float64) for t in tracks]
-            out[f"result_{name}"] = np.asarray(values) if values else np.zeros((0,))
-        return out
+        return out | results_state("result", HandResult, [t.result for t in tracks])
 
     def restore(self, state: dict[str, np.ndarray]) -> None:
         """Continue from a `state`."""
-        def result(k):
-            fields = {name: state[f"result_{name}"][k] for name in HandResult._fields}
-            return HandResult(**{name: Rect(*map(float, v)) if name.endswith("roi") else v if v.ndim else float(v)
-                                 for name, v in fields.items()})
-
-        tracks = [_Track(int(state["hand_id"][k]), result(k), float(state["right_total"][k]),
-                         int(state["frames"][k]), int(state["last_seen"][k])) for k in range(len(state["hand_id"]))]
+        tracks = [_Track(int(state["hand_id"][k]), result_of(state, "result", HandResult, k),
+                         float(state["right_total"][k]), int(state["frames"][k]), int(state["last_seen"][k]))
+                  for k in range(len(state["hand_id"]))]
         tracked = int(state["tracked"])
         self._tracks, self._lost = tracks[:tracked], tracks[tracked:]
         self._frame, self._next_id = int(state["frame"]), int(state["next_id"])

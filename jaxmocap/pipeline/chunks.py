@@ -4,7 +4,7 @@ with the same settings skips them."""
 import io
 import json
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from itertools import islice
 from pathlib import Path
 
@@ -63,3 +63,28 @@ def frame_batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[tuple
         yield index, batch
         del batch
         index += 1
+
+
+def stored_or_solved(frames: Iterator, size: int, store: ChunkStore, chrono: Chrono, solve: Callable, written: Callable,
+                     restore: Callable, bar) -> Iterator:
+    """Each chunk of ``size`` frames of ``frames`` (`frame_batches`): the store's where it holds it (``restore(chunk)``
+    carries the trackers on from it), else ``solve(ids, frames, previous)`` (``previous``: the chunk before, or
+    None), its keypoints written (``written(chunk, first)``, ``first`` its first frame's number in the run) before
+    it is stored. ``bar`` (tqdm) counts the frames."""
+    done, previous = 0, None
+    for index, batch in frame_batches(frames, size, chrono):
+        ids = np.asarray([i for i, _ in batch])
+        chunk = store.load(index)
+        if chunk is None or not np.array_equal(chunk.frame_index, ids):
+            chunk = solve(ids, [frame for _, frame in batch], previous)
+            with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its keypoints written
+                written(chunk, done)
+            store.save(index, chunk)
+        else:
+            restore(chunk)
+        del batch  # its frames go before the next chunk's are read
+        previous = chunk
+        yield chunk
+        done += len(ids)
+        bar.update(len(ids))
+        bar.set_postfix(fps=f"{done / max(chrono.total, 1e-9):.1f}")

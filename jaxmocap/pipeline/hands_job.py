@@ -32,7 +32,7 @@ from jaxmocap.integrate.hand_fit import fit_hands, hand_keypoint_model
 from jaxmocap.io import atomic_path, file_sha256
 from jaxmocap.overlay import OverlayWriter, Posed
 from jaxmocap.pipeline.chrono import Chrono
-from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
+from jaxmocap.pipeline.chunks import ChunkStore, stored_or_solved
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import lens_of
@@ -129,23 +129,11 @@ def solved_hand_chunks(config: RunConfig, media, frames, tracker: HandTracker, s
     (``solve(ids, frames, chrono)``), stored, and its hands written as OpenPose JSON."""
     from tqdm import tqdm
 
-    done = 0
     with tqdm(total=media.frame_count, unit="frame", desc="hands", disable=not config.progress) as bar:
-        for index, batch in frame_batches(frames, config.chunk_size, chrono):
-            ids = np.asarray([i for i, _ in batch])
-            chunk = store.load(index)
-            if chunk is None or not np.array_equal(chunk.frame_index, ids):
-                chunk = solve(ids, [frame for _, frame in batch], chrono)
-                with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its JSON written
-                    write_hand_keypoints(out_dir / "keypoints", media, chunk, done, config.max_hands)
-                store.save(index, chunk)
-            else:
-                tracker.restore(chunk.tracking)
-            del batch  # its frames go before the next chunk's are read
-            yield chunk
-            done += len(ids)
-            bar.update(len(ids))
-            bar.set_postfix(fps=f"{done / max(chrono.total, 1e-9):.1f}")
+        yield from stored_or_solved(
+            frames, config.chunk_size, store, chrono, lambda ids, frames, _: solve(ids, frames, chrono),
+            lambda chunk, first: write_hand_keypoints(out_dir / "keypoints", media, chunk, first, config.max_hands),
+            lambda chunk: tracker.restore(chunk.tracking), bar)
 
 
 def solve_hand_chunk(tracker: HandTracker, model, keypoint_models, regression, iterations: int, ids: np.ndarray,

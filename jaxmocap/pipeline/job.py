@@ -31,7 +31,7 @@ from jaxmocap.integrate.ground import standing, world_arrays
 from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chrono import Chrono
-from jaxmocap.pipeline.chunks import ChunkStore, frame_batches
+from jaxmocap.pipeline.chunks import ChunkStore, stored_or_solved
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
@@ -206,25 +206,17 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
                         redetect_every=search_interval(inputs.media.fps), landmarks=inputs.landmarks)
     tracker = None if still else IdentityTracker()
     camera = CameraTurns(inputs.lens) if _turns_measured(config, inputs) else None
-    done, tracking = 0, {}
+
+    def solve(ids, frames, previous):
+        sides = {} if previous is None else _part(previous.tracking, "sides/")
+        return solve_chunk(config, inputs, detector, tracker, camera, ids, frames, chrono, observed,
+                           {int(i): k for i, k in sides.items()})
+
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
-        for index, batch in frame_batches(inputs.frames, config.chunk_size, chrono):
-            ids = np.asarray([i for i, _ in batch])
-            chunk = store.load(index)
-            if chunk is None or not np.array_equal(chunk.frame_index, ids):
-                chunk = solve_chunk(config, inputs, detector, tracker, camera, ids, [frame for _, frame in batch],
-                                    chrono, observed, {int(i): k for i, k in _part(tracking, "sides/").items()})
-                with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its JSON written
-                    write_keypoints(out_dir / "keypoints", inputs.media, chunk, done)
-                store.save(index, chunk)
-            else:
-                _restore(chunk.tracking, detector, tracker, camera)
-            del batch  # its frames go before the next chunk's are read
-            tracking = chunk.tracking
-            yield chunk
-            done += len(ids)
-            bar.update(len(ids))
-            bar.set_postfix(fps=f"{done / max(chrono.total, 1e-9):.1f}")
+        yield from stored_or_solved(
+            inputs.frames, config.chunk_size, store, chrono, solve,
+            lambda chunk, first: write_keypoints(out_dir / "keypoints", inputs.media, chunk, first),
+            lambda chunk: _restore(chunk.tracking, detector, tracker, camera), bar)
 
 
 def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
