@@ -362,7 +362,7 @@ def run_stages(video: Path, work: Path, end: int | None = None, landmarks: str =
     import smplx_jax
     from jaxmocap.motion import lens, read_motion
     from jaxmocap.pipeline import RunConfig, motion_arrays, run
-    from jaxmocap.pipeline.records import Track, frames_where
+    from jaxmocap.pipeline.tracks import Track, frames_where
     from jaxmocap.pipeline.whole_clip import with_start
 
     model = smplx_jax.load_model(smplx_jax.default_model_path())

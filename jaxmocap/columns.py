@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxmocap.io import atomic_path
+from smplx_jax.atomic_files import atomic_path
 
 COPY_BYTES = 1 << 22  # the most bytes held at once while a column is copied into an .npz
 

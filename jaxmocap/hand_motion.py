@@ -15,9 +15,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
-from jaxmocap.batching import map_in_buckets
+from jaxmocap.buckets import map_in_buckets
 from jaxmocap.errors import InputError
-from jaxmocap.io import read_result_npz, write_result_npz
+from jaxmocap.result_files import read_result_npz, write_result_npz
 from smplx_jax import SIDES
 from smplx_jax.rotations import rotvec_to_rotmat
 

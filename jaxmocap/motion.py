@@ -18,7 +18,7 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.errors import InputError
-from jaxmocap.io import read_result_npz, write_result_npz
+from jaxmocap.result_files import read_result_npz, write_result_npz
 
 # key -> shape after the frame axis ("B": num_betas), or None for a scalar
 MOTION_SHAPES = {

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from smplx_jax.io import atomic_path
+from smplx_jax.atomic_files import atomic_path
 
 GENERATOR_VERSION = 1
 _GENERATOR_DIR = Path(__file__).parent / "_default"

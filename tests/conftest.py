@@ -156,7 +156,7 @@ def frames_alive_at_each_chunk(monkeypatch):
 
     batches, alive, previous = chunks.frame_batches, [], []
 
-    def watched(frames, size, chrono):
+    def watched(frames, size, clock):
         def counted():
             for count, (index, frame) in zip(itertools.count(), frames):
                 if count % size == 0:
@@ -167,7 +167,7 @@ def frames_alive_at_each_chunk(monkeypatch):
                 yield index, frame
                 del frame
 
-        return batches(counted(), size, chrono)
+        return batches(counted(), size, clock)
 
     monkeypatch.setattr(chunks, "frame_batches", watched)
     try:
@@ -194,7 +194,7 @@ def programs_lowered():
 
 
 def temporary_files(folder: Path) -> list[Path]:
-    """What an atomic write leaves behind if it is cut short (`smplx_jax.io.atomic_path`'s names)."""
+    """What an atomic write leaves behind if it is cut short (`smplx_jax.atomic_files.atomic_path`'s names)."""
     return [p for p in folder.rglob(".*") if ".tmp" in p.name]
 
 
@@ -279,7 +279,7 @@ def assert_kept_for_the_next_process(*functions) -> None:
 def assert_one_body(motion: dict, frames=slice(None)) -> None:
     """One shape for the person over ``frames`` of ``motion``'s valid ones: ``betas`` the same row (per-component
     std <= 0.01) and the limb bones' lengths within 0.5% of their median."""
-    from jaxmocap.batching import map_in_buckets
+    from jaxmocap.buckets import map_in_buckets
     from jaxmocap.integrate.fitting import BUCKETS
     from jaxmocap.motion import motion_params
 

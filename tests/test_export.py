@@ -13,8 +13,8 @@ from conftest import load
 from gltf_util import accessor, read_glb, sampled, skinned_vertices
 from jaxmocap.export import animation, global_transforms, write_bvh, write_gltf
 from jaxmocap.export.animation import CAMERA_TO_WORLD
-from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
+from jaxmocap.result_files import file_sha256
 from params_util import random_params
 from smplx_jax.rotations import rotvec_to_rotmat
 

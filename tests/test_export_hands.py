@@ -13,7 +13,7 @@ from gltf_util import read_glb, sampled, skinned_vertices
 from jaxmocap.export import write_hands_gltf
 from jaxmocap.export.animation import CAMERA_TO_WORLD
 from jaxmocap.hand_motion import hand_meshes, write_hands
-from jaxmocap.io import file_sha256
+from jaxmocap.result_files import file_sha256
 from smplx_jax import SIDES
 from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 

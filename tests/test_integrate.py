@@ -13,7 +13,7 @@ import pytest
 
 import smplx_jax
 from conftest import jit_fast_compile, load
-from jaxmocap.batching import bucket_size
+from jaxmocap.buckets import bucket_size
 from jaxmocap.cli import main
 from jaxmocap.integrate import (
     copy_paste,

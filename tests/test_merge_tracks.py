@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
-from jaxmocap.pipeline.records import Track
+from jaxmocap.pipeline.tracks import Track
 
 FPS = 30.0
 SIZES = SimpleNamespace(num_betas=10, num_expression=10)

@@ -35,10 +35,10 @@ from jaxmocap.errors import InputError
 from jaxmocap.export import animation, global_transforms
 from jaxmocap.frame_source import open_media
 from jaxmocap.integrate import inverse_kinematics
-from jaxmocap.io import file_sha256
 from jaxmocap.motion import MOTION_SHAPES, PINHOLE_SHAPES, WORLD_SHAPES, read_motion
 from jaxmocap.pipeline import Observations, RunConfig, whole_clip
 from jaxmocap.pipeline.observe import fill_hand_gaps
+from jaxmocap.result_files import file_sha256
 from smplx_jax import constants
 from smplx_jax.rotations import rotvec_to_rotmat
 

@@ -28,7 +28,7 @@ from flax import nnx
 from jaxtyping import Array, Bool, Float
 
 import smplx_jax
-from jaxmocap.batching import pad_rows
+from jaxmocap.buckets import pad_rows
 from jaxmocap.errors import InputError
 from jaxmocap.regressors import crops
 from jaxmocap.regressors.weights import load_network

@@ -6,7 +6,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from smplx_jax.io import atomic_path
+from smplx_jax.atomic_files import atomic_path
 
 WIDTH, HEIGHT, MARGIN = 560, 360, 60
 COLOURS = [(200, 90, 30), (40, 140, 40), (30, 60, 200), (140, 40, 140)]  # BGR

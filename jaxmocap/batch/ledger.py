@@ -10,8 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import smplx_jax
-from jaxmocap.io import atomic_write_text, file_sha256
 from jaxmocap.pipeline.config import AT_THE_END, RunConfig, chunk_key
+from jaxmocap.result_files import file_sha256
+from smplx_jax.atomic_files import atomic_write_text
 
 MARKS = ".jaxmocap_batch"
 STATUSES = ("done", "failed", "stopped")

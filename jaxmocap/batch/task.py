@@ -9,8 +9,8 @@ import numpy as np
 from jaxmocap.batch.ledger import VideoRecord, write_mark
 from jaxmocap.compile_cache import use_compilation_cache
 from jaxmocap.errors import InputError
-from jaxmocap.io import read_result_npz
 from jaxmocap.pipeline import RunConfig, run
+from jaxmocap.result_files import read_result_npz
 from jaxmocap.signals import cancellable
 from jaxmocap.xla_options import configure_process
 from smplx_jax import ModelFileError

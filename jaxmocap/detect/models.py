@@ -21,10 +21,11 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from smplx_jax.atomic_files import atomic_path
 from smplx_jax.default_model import cache_root, private_folder
 from smplx_jax.model_file import ModelFileError
 
-from ..io import atomic_path, file_sha256
+from ..result_files import file_sha256
 
 MEDIAPIPE_VERSION = "0.10.21"
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_write_text
+from smplx_jax.atomic_files import atomic_write_text
 
 NUM_KEYPOINTS = 67
 BODY_SLICE, LEFT_HAND_SLICE, RIGHT_HAND_SLICE = slice(0, 25), slice(25, 46), slice(46, 67)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxmocap.export.animation import Animation
-from jaxmocap.io import atomic_write_text
+from smplx_jax.atomic_files import atomic_write_text
 
 
 def zyx_euler_degrees(rotmats: np.ndarray) -> np.ndarray:

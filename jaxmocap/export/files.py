@@ -11,8 +11,8 @@ from jaxmocap.export.bvh import write_bvh
 from jaxmocap.export.gltf import write_gltf
 from jaxmocap.export.hands_gltf import write_hands_gltf
 from jaxmocap.hand_motion import read_hands
-from jaxmocap.io import file_sha256
 from jaxmocap.motion import read_motion
+from jaxmocap.result_files import file_sha256
 
 
 def is_hands_file(path) -> bool:

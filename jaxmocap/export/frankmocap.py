@@ -28,10 +28,10 @@ import jax
 import numpy as np
 
 import smplx_jax
-from jaxmocap.io import atomic_write_bytes
 from jaxmocap.motion import motion_params
 from jaxmocap.regressors.crops import SIZE, body_windows, hand_windows
 from smplx_jax import constants
+from smplx_jax.atomic_files import atomic_write_bytes
 from smplx_jax.rotations import rotmat_to_rotvec
 
 _HALF = SIZE / 2

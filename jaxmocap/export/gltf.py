@@ -17,7 +17,7 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.export.animation import Animation
-from jaxmocap.io import atomic_write_bytes, atomic_write_text
+from smplx_jax.atomic_files import atomic_write_bytes, atomic_write_text
 from smplx_jax.geometry import vertex_normals
 from smplx_jax.rotations import rotmat_to_quat
 

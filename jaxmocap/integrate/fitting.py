@@ -26,7 +26,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from jaxmocap.batching import map_in_buckets
+from jaxmocap.buckets import map_in_buckets
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.camera import weak_perspective_from_points, weak_perspective_least_squares

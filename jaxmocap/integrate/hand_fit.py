@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from jaxmocap.batching import map_in_buckets
+from jaxmocap.buckets import map_in_buckets
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate.fitting import OK, FitConfig, fit_one
 from jaxmocap.integrate.inverse_kinematics import LEFT_HAND_IK_JOINTS, RIGHT_HAND_IK_JOINTS, IKConfig, ik_one

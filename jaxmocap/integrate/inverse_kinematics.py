@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxmocap.batching import map_in_buckets
+from jaxmocap.buckets import map_in_buckets
 from jaxmocap.compile_cache import disk_jit
 from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.fitting import BUCKETS, default_pose

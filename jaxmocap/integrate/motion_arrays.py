@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
-from jaxmocap.batching import map_in_buckets
+from jaxmocap.buckets import map_in_buckets
 from jaxmocap.integrate import fitting
 from jaxmocap.integrate.camera import project
 from smplx_jax import constants

@@ -19,12 +19,12 @@ import smplx_jax
 from jaxmocap.columns import Columns, write_npz
 from jaxmocap.integrate.clip import FOOT_JOINTS
 from jaxmocap.integrate.motion_arrays import body_joints
-from jaxmocap.io import result_arrays
 from jaxmocap.live.causal import Solved
 from jaxmocap.live.world import LiveWorld, world_columns
 from jaxmocap.motion import PINHOLE_SHAPES
-from jaxmocap.pipeline.records import Bodies
 from jaxmocap.pipeline.stages import Lens, motion_arrays
+from jaxmocap.pipeline.tracks import Bodies
+from jaxmocap.result_files import result_arrays
 
 FLUSH_SECONDS = 5.0  # the most of a session a crash loses, and how often the files are rewritten
 JOURNAL = ".recording"

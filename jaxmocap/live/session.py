@@ -27,7 +27,6 @@ from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import LANDMARK_MODELS, available_landmarks
 from jaxmocap.errors import InputError
 from jaxmocap.frame_source import STREAM_TIMEOUT_S
-from jaxmocap.io import file_sha256
 from jaxmocap.live.causal import CausalSolver, LiveSettings, Solved
 from jaxmocap.live.mailbox import Closed, Mailbox
 from jaxmocap.live.record import CLOSE_SECONDS, Recorder
@@ -39,6 +38,7 @@ from jaxmocap.overlay import Posed, people_over_frame
 from jaxmocap.pipeline.config import MODES
 from jaxmocap.pipeline.observe import Observations, observe_people
 from jaxmocap.pipeline.stages import lens_of
+from jaxmocap.result_files import file_sha256
 from jaxmocap.signals import handling
 
 

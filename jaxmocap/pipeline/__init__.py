@@ -9,16 +9,16 @@ Modules: `config` (`RunConfig`), `entry` (`run`, every mode's entry), `job` (`ru
 clip as one fit, in windows by frame number), `regress` (FrankMocap's regressors in place of IK and the clip fit),
 `records` (what the stages hand each other), `report` (`RunReport`), `chunks` (frames in chunks and the resumable
 chunk store), `outputs` (OpenPose JSON, overlay, exports, FrankMocap pickles), `observe` (the detector's person
-as arrays, repaired), `fit_folder` (``jaxmocap fit``), `chrono` (stage timing), `exemplar` and `hand_boxes` (parts
+as arrays, repaired), `fit_folder` (``jaxmocap fit``), `clock` (stage timing), `exemplar` and `hand_boxes` (parts
 of the regressors' path). Imports run one way: `entry` -> the jobs -> the rest.
 """
 
 from jaxmocap.pipeline.config import RunConfig
 from jaxmocap.pipeline.entry import run
 from jaxmocap.pipeline.observe import Observations, observe
-from jaxmocap.pipeline.records import Bodies, Chunk
 from jaxmocap.pipeline.report import RunReport
 from jaxmocap.pipeline.stages import initial_bodies, motion_arrays, observations
+from jaxmocap.pipeline.tracks import Bodies, Chunk
 from jaxmocap.pipeline.whole_clip import fitted_clip, fitted_track
 
 __all__ = ["Bodies", "Chunk", "Observations", "RunConfig", "RunReport", "fitted_clip", "fitted_track", "initial_bodies",

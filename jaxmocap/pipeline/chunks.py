@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxmocap.io import atomic_write_bytes, atomic_write_text
-from jaxmocap.pipeline.chrono import Chrono
-from jaxmocap.pipeline.records import Chunk
+from jaxmocap.pipeline.stage_clock import StageClock
+from jaxmocap.pipeline.tracks import Chunk
+from smplx_jax.atomic_files import atomic_write_bytes, atomic_write_text
 
 
 class ChunkStore:
@@ -49,14 +49,14 @@ class ChunkStore:
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
-def frame_batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[tuple[int, list]]:
+def frame_batches(frames: Iterator, size: int, clock: StageClock) -> Iterator[tuple[int, list]]:
     """Lists of ``size`` items of ``frames`` (the last shorter), numbered from 0, their reading timed as ``decode``.
     A list is let go before the next is read (a chunk of decoded frames is the run's largest holding: 128 frames of
     1080p video are 800 MB), so the caller must let it go too, and not number them with `enumerate`, whose last
     pair lives on while the next item is read."""
     index = 0
     while True:
-        with chrono("decode"):
+        with clock("decode"):
             batch = list(islice(frames, size))
         if not batch:
             return
@@ -65,19 +65,19 @@ def frame_batches(frames: Iterator, size: int, chrono: Chrono) -> Iterator[tuple
         index += 1
 
 
-def stored_or_solved(frames: Iterator, size: int, store: ChunkStore, chrono: Chrono, solve: Callable, written: Callable,
-                     restore: Callable, bar) -> Iterator:
+def stored_or_solved(frames: Iterator, size: int, store: ChunkStore, clock: StageClock, solve: Callable,
+                     written: Callable, restore: Callable, bar) -> Iterator:
     """Each chunk of ``size`` frames of ``frames`` (`frame_batches`): the store's where it holds it (``restore(chunk)``
     carries the trackers on from it), else ``solve(ids, frames, previous)`` (``previous``: the chunk before, or
     None), its keypoints written (``written(chunk, first)``, ``first`` its first frame's number in the run) before
     it is stored. ``bar`` (tqdm) counts the frames."""
     done, previous = 0, None
-    for index, batch in frame_batches(frames, size, chrono):
+    for index, batch in frame_batches(frames, size, clock):
         ids = np.asarray([i for i, _ in batch])
         chunk = store.load(index)
         if chunk is None or not np.array_equal(chunk.frame_index, ids):
             chunk = solve(ids, [frame for _, frame in batch], previous)
-            with chrono("keypoints"):  # before the chunk is stored: a stored chunk has its keypoints written
+            with clock("keypoints"):  # before the chunk is stored: a stored chunk has its keypoints written
                 written(chunk, done)
             store.save(index, chunk)
         else:
@@ -87,4 +87,4 @@ def stored_or_solved(frames: Iterator, size: int, store: ChunkStore, chrono: Chr
         yield chunk
         done += len(ids)
         bar.update(len(ids))
-        bar.set_postfix(fps=f"{done / max(chrono.total, 1e-9):.1f}")
+        bar.set_postfix(fps=f"{done / max(clock.total, 1e-9):.1f}")

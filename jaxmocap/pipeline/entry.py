@@ -4,11 +4,11 @@ neither each other nor this module."""
 
 from pathlib import Path
 
-from jaxmocap.io import remove_abandoned
 from jaxmocap.pipeline.config import RunConfig
 from jaxmocap.pipeline.hands_job import run_hands
 from jaxmocap.pipeline.job import Observer, run_bodies
 from jaxmocap.pipeline.report import RunReport
+from smplx_jax.atomic_files import remove_abandoned
 
 
 def run(config: RunConfig, out_dir, observed: Observer | None = None) -> RunReport:

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import smplx_jax
-from jaxmocap.batching import pad_rows, padded_size
+from jaxmocap.buckets import pad_rows, padded_size
 from jaxmocap.integrate.eft import EFTConfig, fine_tune
 from jaxmocap.regressors import BodyOutput, Predictor, crops
 

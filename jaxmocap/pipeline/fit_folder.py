@@ -18,11 +18,11 @@ from jaxmocap.errors import InputError
 from jaxmocap.integrate import ClipConfig
 from jaxmocap.integrate.fitting import params_from_full_pose
 from jaxmocap.integrate.keypoint_start import facing_pose
-from jaxmocap.io import file_sha256
 from jaxmocap.motion import motion_params, read_motion, write_motion
-from jaxmocap.pipeline.records import Bodies
 from jaxmocap.pipeline.stages import Lens, lens_of, motion_arrays, placed_bodies
+from jaxmocap.pipeline.tracks import Bodies
 from jaxmocap.pipeline.whole_clip import FittedClip, blocks, fitted_clip
+from jaxmocap.result_files import file_sha256
 
 
 def read_keypoint_folder(folder) -> tuple[list[Path], np.ndarray]:

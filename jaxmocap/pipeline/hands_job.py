@@ -29,15 +29,16 @@ from jaxmocap.frame_source import open_media
 from jaxmocap.hand_motion import HAND_SHAPES, hand_meshes, write_hands
 from jaxmocap.integrate.hand_clip import fit_hand_clip, hand_clip_start
 from jaxmocap.integrate.hand_fit import fit_hands, hand_keypoint_model
-from jaxmocap.io import atomic_path, file_sha256
 from jaxmocap.overlay import OverlayWriter, Posed
-from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore, stored_or_solved
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.report import RunReport
+from jaxmocap.pipeline.stage_clock import StageClock
 from jaxmocap.pipeline.stages import lens_of
 from jaxmocap.pipeline.whole_clip import hand_bone_directions, part_noise_px, window_spans
+from jaxmocap.result_files import file_sha256
 from smplx_jax import SIDES
+from smplx_jax.atomic_files import atomic_path
 
 SETTINGS_VERSION = 1  # of the stored chunks
 
@@ -88,10 +89,10 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     tracker = HandTracker(static_image_mode=still, max_hands=config.max_hands,
                           redetect_every=search_interval(media.fps))
     store = ChunkStore(out_dir, chunk_key(config, model_sha256) | {"version": SETTINGS_VERSION}, HandChunk)
-    chrono = Chrono()
+    clock = StageClock()
     solve = functools.partial(solve_hand_chunk, tracker, model, {s: hand_keypoint_model(model, s) for s in SIDES},
                               regression, config.iterations)
-    chunks = list(solved_hand_chunks(config, media, frames, tracker, store, solve, out_dir, chrono))
+    chunks = list(solved_hand_chunks(config, media, frames, tracker, store, solve, out_dir, clock))
     frames_total = sum(len(c.frame_index) for c in chunks)
     table = whole_table(chunks)
     meta = {"fps": np.asarray(media.fps), "image_size": np.asarray(media.size),
@@ -99,9 +100,9 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
     hand_models = {side: smplx_jax.hand_model(model, side) for side in SIDES}
     fit = functools.partial(fitted_side, model, lens_of(media.size, config.focal_length), media.fps) if (
         config.smooth and not still) else None
-    with chrono("clip"):
+    with clock("clip"):
         hands = side_arrays(table, frames_total, fit)
-    with chrono("write"):
+    with clock("write"):
         written = [write_hands(out_dir / "hands.npz", hands | meta)]
         if config.max_hands > 2:
             for hand_id in np.unique(table["hand_id"]):
@@ -109,39 +110,39 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
                 written.append(write_hands(out_dir / "hands" / f"{int(hand_id)}.npz",
                                            side_arrays(own, frames_total, fit) | meta))
     if config.overlay:
-        with chrono("overlay"):
+        with clock("overlay"):
             written.append(write_hands_overlay(out_dir / "overlay.mp4", config, hand_models, hands, media.fps,
                                                media.size, frames_total))
     if "gltf" in config.exports and (hands["left_valid"].any() or hands["right_valid"].any()):
         from jaxmocap.export.hands_gltf import write_hands_gltf
 
-        with chrono("exports"):
+        with clock("exports"):
             written.append(write_hands_gltf(out_dir / "hands.glb", model, hands | meta))
     store.clear()
     valid = int((hands["left_valid"] | hands["right_valid"]).sum())
-    return RunReport(written[0], frames_total, valid, dict(chrono.seconds), written,
+    return RunReport(written[0], frames_total, valid, dict(clock.seconds), written,
                      sorted(int(i) for i in np.unique(table["hand_id"])))
 
 
 def solved_hand_chunks(config: RunConfig, media, frames, tracker: HandTracker, store: ChunkStore, solve,
-                       out_dir: Path, chrono: Chrono):
+                       out_dir: Path, clock: StageClock):
     """Each chunk of frames, from the store if it holds it (the tracker restored from it), else solved
-    (``solve(ids, frames, chrono)``), stored, and its hands written as OpenPose JSON."""
+    (``solve(ids, frames, clock)``), stored, and its hands written as OpenPose JSON."""
     from tqdm import tqdm
 
     with tqdm(total=media.frame_count, unit="frame", desc="hands", disable=not config.progress) as bar:
         yield from stored_or_solved(
-            frames, config.chunk_size, store, chrono, lambda ids, frames, _: solve(ids, frames, chrono),
+            frames, config.chunk_size, store, clock, lambda ids, frames, _: solve(ids, frames, clock),
             lambda chunk, first: write_hand_keypoints(out_dir / "keypoints", media, chunk, first, config.max_hands),
             lambda chunk: tracker.restore(chunk.tracking), bar)
 
 
 def solve_hand_chunk(tracker: HandTracker, model, keypoint_models, regression, iterations: int, ids: np.ndarray,
-                     frames: list[np.ndarray], chrono: Chrono) -> HandChunk:
+                     frames: list[np.ndarray], clock: StageClock) -> HandChunk:
     """One chunk of frames through the hand tracker and each hand's fit."""
-    with chrono("detect"):
+    with clock("detect"):
         table = detected(tracker, frames)
-    with chrono("fit"):
+    with clock("fit"):
         table |= fitted(model, keypoint_models, table, frames, regression, iterations)
     return HandChunk(ids, table, tracker.state())
 

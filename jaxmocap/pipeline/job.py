@@ -28,18 +28,16 @@ from jaxmocap.detect.models import available_landmarks
 from jaxmocap.detect.verticals import AGREE_RAD, images_vertical
 from jaxmocap.frame_source import Media, open_media, sample_frames
 from jaxmocap.integrate.ground import standing, world_arrays
-from jaxmocap.io import file_sha256
 from jaxmocap.motion import write_motion
-from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.chunks import ChunkStore, stored_or_solved
 from jaxmocap.pipeline.config import RunConfig, chunk_key
 from jaxmocap.pipeline.fit_folder import keypoints_by_frame
 from jaxmocap.pipeline.merge_tracks import merge_split_tracks
 from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
 from jaxmocap.pipeline.outputs import write_keypoints, write_outputs
-from jaxmocap.pipeline.records import Bodies, Chunk, Track
 from jaxmocap.pipeline.regress import Regression, regressed_bodies
 from jaxmocap.pipeline.report import RunReport
+from jaxmocap.pipeline.stage_clock import StageClock
 from jaxmocap.pipeline.stages import (
     Lens,
     lens_of,
@@ -48,7 +46,9 @@ from jaxmocap.pipeline.stages import (
     observations,
     placed_bodies,
 )
+from jaxmocap.pipeline.tracks import Bodies, Chunk, Track
 from jaxmocap.pipeline.whole_clip import fitted_track, with_start
+from jaxmocap.result_files import file_sha256
 from smplx_jax.rotations import rotvec_to_rotmat
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
@@ -97,17 +97,17 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
     inputs = Inputs.open(config)
     config = dataclasses.replace(config, landmarks=inputs.landmarks)  # what the chunks are made with
     store = ChunkStore(out_dir, chunk_key(config, inputs.model_sha256) | {"version": SETTINGS_VERSION})
-    chrono = Chrono()
-    chunks = list(solved_chunks(config, inputs, store, out_dir, chrono, observed))
+    clock = StageClock()
+    chunks = list(solved_chunks(config, inputs, store, out_dir, clock, observed))
     video = inputs.media.kind in ("video", "webcam")
     tracks = merge_split_tracks(whole_tracks(chunks, inputs.model), inputs.media.fps if video else None,
                                 config.max_people)
     if inputs.regression is None:
-        with chrono("ik"):  # each frame's start, in windows placed by frame number (not by chunk)
+        with clock("ik"):  # each frame's start, in windows placed by frame number (not by chunk)
             tracks = {i: with_start(inputs.model, t, inputs.lens) for i, t in tracks.items()}
     fit, rate = _clip_fitted(config, inputs), inputs.media.fps if video and config.smooth else None
     turns = np.concatenate([c.scene_from_camera for c in chunks]) if _turns_measured(config, inputs) else None
-    with chrono("fit"):  # the whole clip (or the regressors' shape)
+    with clock("fit"):  # the whole clip (or the regressors' shape)
 
         def person_bodies(track):
             if fit:  # the whole clip as one fit
@@ -117,7 +117,7 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
     ground = None
     if video and inputs.lens[0] is not None:  # the scene's floor, everyone on it
-        with chrono("ground"):
+        with clock("ground"):
             ground = standing(inputs.model, _people(tracks), inputs.media.fps,
                               functools.partial(_scene_up, config, inputs, chunks), turns)
             if ground and fit and rate:  # the clip fit refitted standing on it
@@ -125,7 +125,7 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
                                                                         ground=ground.clip_ground(i),
                                                                         scene_from_camera=turns))
                           for i, t in tracks.items()}
-    with chrono("write"):
+    with clock("write"):
         meta = {"fps": np.asarray(inputs.media.fps), "image_size": np.asarray(inputs.media.size),
                 "model_sha256": np.asarray(inputs.model_sha256), "landmark_model": np.asarray(inputs.landmarks)}
         motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
@@ -139,9 +139,9 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
             inputs.model, Bodies.absent(frames, inputs.model), np.zeros((frames, 67, 3)), inputs.lens) | meta
         written = [write_motion(out_dir / "motion.npz", motion)]
         written += [write_motion(out_dir / "people" / str(i) / "motion.npz", m) for i, m in motions.items()]
-    written += write_outputs(config, out_dir, inputs.model, inputs.media, motions, main, tracks, chunks, chrono)
+    written += write_outputs(config, out_dir, inputs.model, inputs.media, motions, main, tracks, chunks, clock)
     store.clear()
-    return RunReport(written[0], frames, int(motion["valid"].sum()), dict(chrono.seconds), written, sorted(motions),
+    return RunReport(written[0], frames, int(motion["valid"].sum()), dict(clock.seconds), written, sorted(motions),
                      inputs.landmarks, None if turns is None else camera_motion(
                          turns, np.concatenate([c.background_px for c in chunks]), max(inputs.media.size)))
 
@@ -193,7 +193,7 @@ def whole_tracks(chunks: list[Chunk], model: smplx_jax.BodyModel) -> dict[int, T
             for i in people}
 
 
-def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir: Path, chrono: Chrono,
+def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir: Path, clock: StageClock,
                   observed: Observer | None = None) -> Iterator[Chunk]:
     """Each chunk of frames, from the store if it holds it, else through the per-chunk stages (`solve_chunk`),
     then stored and its detections written as OpenPose JSON. The detector's tracks, the identities and each
@@ -209,30 +209,30 @@ def solved_chunks(config: RunConfig, inputs: Inputs, store: ChunkStore, out_dir:
 
     def solve(ids, frames, previous):
         sides = {} if previous is None else _part(previous.tracking, "sides/")
-        return solve_chunk(config, inputs, detector, tracker, camera, ids, frames, chrono, observed,
+        return solve_chunk(config, inputs, detector, tracker, camera, ids, frames, clock, observed,
                            {int(i): k for i, k in sides.items()})
 
     with tqdm(total=inputs.media.frame_count, unit="frame", desc="run", disable=not config.progress) as bar:
         yield from stored_or_solved(
-            inputs.frames, config.chunk_size, store, chrono, solve,
+            inputs.frames, config.chunk_size, store, clock, solve,
             lambda chunk, first: write_keypoints(out_dir / "keypoints", inputs.media, chunk, first),
             lambda chunk: _restore(chunk.tracking, detector, tracker, camera), bar)
 
 
 def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: IdentityTracker | None,
-                camera: CameraTurns | None, ids: np.ndarray, frames: list[np.ndarray], chrono: Chrono,
+                camera: CameraTurns | None, ids: np.ndarray, frames: list[np.ndarray], clock: StageClock,
                 observed: Observer | None = None, previous: dict[int, np.ndarray] | None = None) -> Chunk:
     """One chunk through detection and the camera's turns (``camera``; None: a static camera), then for each
     person the regressors (if any: without them the clip fit's start comes over the whole track, `with_start`);
     ``previous``: each identity's repaired keypoints in the frame before the chunk."""
-    with chrono("detect"):
+    with clock("detect"):
         given = None if inputs.given_keypoints is None else np.stack(
             [inputs.given_keypoints.get(int(i), np.zeros((67, 3))) for i in ids])
         video = inputs.media.kind in ("video", "webcam")
         people, last = observations(detector, tracker, frames, inputs.media.fps if video else None, given, previous)
     turns, background = np.zeros((len(frames), 3), np.float32), np.full(len(frames), np.nan, np.float32)
     if camera is not None:
-        with chrono("camera"):
+        with clock("camera"):
             turns, background = camera.turns(frames, [np.stack([o.body_box[k] for o in people.values()])
                                                       if people else np.zeros((0, 4)) for k in range(len(frames))])
     tracks = {}
@@ -240,7 +240,7 @@ def solve_chunk(config: RunConfig, inputs: Inputs, detector: Detector, tracker: 
         if inputs.regression is None:  # the start comes over the whole track (`with_start`)
             bodies, hand_boxes = Bodies.absent(len(frames), inputs.model), obs.hand_boxes
         else:
-            with chrono("regress"):
+            with clock("regress"):
                 boxed = fill_hand_gaps(obs, round(HAND_GAP_SECONDS * inputs.media.fps)) if video else obs
                 bodies, hand_boxes = regressed_bodies(inputs.model, inputs.regression, frames, boxed,
                                                       config.integration)

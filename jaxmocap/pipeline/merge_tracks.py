@@ -9,7 +9,7 @@ every track is that person.
 
 import numpy as np
 
-from jaxmocap.pipeline.records import Track, frames_where
+from jaxmocap.pipeline.tracks import Track, frames_where
 
 MAX_GAP_SECONDS = 2.0
 MAX_JUMP = 1.0  # box heights between where one track ends and the next begins

@@ -9,18 +9,18 @@ import numpy as np
 from tqdm import tqdm
 
 import smplx_jax
-from jaxmocap.batching import pad_rows
+from jaxmocap.buckets import pad_rows
 from jaxmocap.detect.openpose import json_name, write_openpose_json
 from jaxmocap.export import animation, write_bvh, write_gltf
 from jaxmocap.export.frankmocap import write_frankmocap_pkls
 from jaxmocap.frame_source import Media, open_media
 from jaxmocap.integrate.ground import camera_floors
-from jaxmocap.io import atomic_path, atomic_write_bytes
 from jaxmocap.motion import lens, motion_params
 from jaxmocap.overlay import OverlayWriter, Posed, body_up
-from jaxmocap.pipeline.chrono import Chrono
 from jaxmocap.pipeline.config import EXPORT_FILES, RunConfig
-from jaxmocap.pipeline.records import Chunk, Track
+from jaxmocap.pipeline.stage_clock import StageClock
+from jaxmocap.pipeline.tracks import Chunk, Track
+from smplx_jax.atomic_files import atomic_path, atomic_write_bytes
 
 _VERTICES = jax.jit(jax.vmap(lambda model, params: smplx_jax.forward(model, params).vertices, in_axes=(None, 0)))
 _BATCH = 16
@@ -92,25 +92,25 @@ def write_keypoints(folder: Path, media: Media, chunk: Chunk, first: int) -> Non
 
 def write_outputs(config: RunConfig, out_dir: Path, model: smplx_jax.BodyModel, media: Media,
                   motions: dict[int, dict], main: int | None, tracks: dict[int, Track], chunks: list[Chunk],
-                  chrono: Chrono) -> list[Path]:
+                  clock: StageClock) -> list[Path]:
     """What ``config`` asks for besides the motions: FrankMocap's pickles (every person of each frame), the
     overlay video (everyone), the exports (the main person's in ``out_dir``, each person's in
     ``out_dir/people/<id>``)."""
     written = []
     if config.frankmocap_pkl:
-        with chrono("frankmocap"):
+        with clock("frankmocap"):
             frames = np.concatenate([c.frame_index for c in chunks])
             people = {i: (motions[i], tracks[i].body_box, tracks[i].hand_boxes) for i in motions}
             written += write_frankmocap_pkls(out_dir, model, people, _frame_images(media, out_dir, frames))
     if config.save_frames and not media.paths:
-        with chrono("frames"):
+        with clock("frames"):
             written += write_frames(out_dir, config, media)
     if config.overlay:
-        with chrono("overlay"):
+        with clock("overlay"):
             total = sum(len(c.frame_index) for c in chunks)
             written.append(write_overlay(out_dir / "overlay.mp4", model, motions, config, media.size, total))
     if config.exports:
-        with chrono("exports"):
+        with clock("exports"):
             if main is not None:
                 written += write_exports(out_dir, model, motions[main], config.exports)
             for person_id, motion in motions.items():

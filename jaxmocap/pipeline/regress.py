@@ -12,7 +12,7 @@ from jaxmocap.integrate import copy_paste
 from jaxmocap.pipeline.exemplar import fine_tuned_bodies
 from jaxmocap.pipeline.hand_boxes import hand_boxes_from_body
 from jaxmocap.pipeline.observe import Observations
-from jaxmocap.pipeline.records import Bodies
+from jaxmocap.pipeline.tracks import Bodies
 from jaxmocap.regressors import Predictor, crops, decode_bodies, decode_hands, load, predict_bodies, predict_hands
 from smplx_jax import constants
 from smplx_jax.rotations import rotmat_to_rotvec

@@ -21,7 +21,7 @@ from jaxmocap.integrate.camera import default_focal_length, weak_perspective_fro
 from jaxmocap.integrate.fitting import openpose_keypoint_model, params_from_full_pose
 from jaxmocap.integrate.keypoints import keypoints_cm
 from jaxmocap.pipeline.observe import Observations, observe_people, repair_side_swaps
-from jaxmocap.pipeline.records import Bodies
+from jaxmocap.pipeline.tracks import Bodies
 
 Lens = tuple[float, np.ndarray] | tuple[None, None]  # a pinhole camera's (focal_length, principal_point), or none
 

@@ -35,8 +35,8 @@ from jaxmocap.integrate.clip import (
 from jaxmocap.integrate.clip_start import hypothesis_costs, limb_codes, with_codes
 from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
-from jaxmocap.pipeline.records import Bodies, Track
 from jaxmocap.pipeline.stages import initial_bodies
+from jaxmocap.pipeline.tracks import Bodies, Track
 from smplx_jax.rotations import rotvec_to_rotmat
 
 # The landmark models' 2D noise, a share of the extent of what they crop: a few pixels of their 256- or 224-pixel

@@ -9,7 +9,7 @@ import numpy as np
 from flax import nnx
 from jaxtyping import Array, ArrayLike, Float
 
-from jaxmocap.batching import map_in_buckets, pad_rows, padded_size
+from jaxmocap.buckets import map_in_buckets, pad_rows, padded_size
 from jaxmocap.regressors import crops as _crops
 from jaxmocap.regressors.body import BodyOutput
 from jaxmocap.regressors.weights import Regressors

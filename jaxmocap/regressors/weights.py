@@ -15,10 +15,11 @@ import numpy as np
 from flax import nnx
 
 from jaxmocap.errors import InputError
-from jaxmocap.io import atomic_path, atomic_write_text, file_sha256
 from jaxmocap.regressors.body import BodyConfig, BodyRegressor
 from jaxmocap.regressors.hand import HandConfig, HandRegressor
+from jaxmocap.result_files import file_sha256
 from jaxmocap.xla_options import RUN_ONCE
+from smplx_jax.atomic_files import atomic_path, atomic_write_text
 
 FORMAT, VERSION, INDEX = "jaxmocap-regressors", 1, "regressors.json"
 _KINDS = {"hand": (HandRegressor, HandConfig), "body": (BodyRegressor, BodyConfig)}

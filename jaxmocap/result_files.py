@@ -1,5 +1,5 @@
-"""File helpers: atomic writes (`smplx_jax.io`, shared with the body model's cache), checksums, and the result
-files' ``.npz`` (motion.npz, hands.npz) written and read."""
+"""The result files (motion.npz, hands.npz): their arrays as stored, written atomically and read with a clear error;
+and files' checksums (the model a result was made with)."""
 
 import hashlib
 import io
@@ -9,10 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxmocap.errors import InputError
-from smplx_jax.io import atomic_path, atomic_write_bytes, atomic_write_text, remove_abandoned
-
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "file_sha256", "read_result_npz",
-           "remove_abandoned", "result_arrays", "write_result_npz"]
+from smplx_jax.atomic_files import atomic_write_bytes
 
 
 def file_sha256(path) -> str:

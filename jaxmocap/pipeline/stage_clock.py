@@ -5,8 +5,8 @@ from collections import defaultdict
 from contextlib import contextmanager
 
 
-class Chrono:
-    """``with chrono("detect"): ...`` adds the block's seconds to ``chrono.seconds["detect"]`` (stages in the order
+class StageClock:
+    """``with clock("detect"): ...`` adds the block's seconds to ``clock.seconds["detect"]`` (stages in the order
     first timed)."""
 
     def __init__(self):

@@ -9,7 +9,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from smplx_jax.io import atomic_path, atomic_write_bytes, atomic_write_text, remove_abandoned
+from smplx_jax.atomic_files import atomic_path, atomic_write_bytes, atomic_write_text, remove_abandoned
 
 
 def test_a_write_replaces_the_file_readable_by_others(tmp_path):
@@ -39,7 +39,7 @@ def test_a_killed_writers_temporary_file_is_removed_and_a_live_ones_kept(tmp_pat
     target = tmp_path / "people" / "0" / "motion.npz"
     writer = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import time
-        from smplx_jax.io import atomic_path
+        from smplx_jax.atomic_files import atomic_path
         with atomic_path({str(target)!r}) as tmp:
             tmp.write_bytes(b"half")
             print("writing", flush=True)

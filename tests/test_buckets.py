@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxmocap.batching import bucket_size, map_in_buckets, pad_rows, padded_size
+from jaxmocap.buckets import bucket_size, map_in_buckets, pad_rows, padded_size
 
 BUCKETS = (1, 4, 16)
 
