@@ -100,10 +100,6 @@ class _DiskJit:
         program = self.programs[key]
         return self.jitted(*args, **kwargs) if program is None else program(dynamic)
 
-    def _cache_size(self) -> int:
-        """Programs this process holds (as `jax.jit`'s: a second call with the same shapes adds none)."""
-        return len(self.programs) + self.jitted._cache_size()
-
     def _load_or_export(self, static, dynamic, key):
         name = f"{self.fun.__module__}.{self.fun.__qualname__}"
         identity = repr((name, *key, _versions_and_sources()))

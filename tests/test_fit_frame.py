@@ -133,8 +133,11 @@ def test_the_solvers_model_has_the_costs_gradient(x64, default_model_dir, focal)
     @jit_fast_compile
     def cost_gradient(y, problem):  # in the local increments of the rotations the solver steps by
         zero = jax.tree.map(jnp.zeros_like, y)
-        return jax.grad(lambda step: levenberg_marquardt.cost_of(levenberg_marquardt.retract(y, step), problem,
-                                                                 config))(zero)
+        def cost(step):
+            parts = least_squares.residuals(levenberg_marquardt.retract(y, step), problem, config)
+            return 0.5 * sum(jnp.sum(part * part) for part in parts)
+
+        return jax.grad(cost)(zero)
 
     cg_gradient, dense, chol_gradient, chol_dense = models(y, problem)
     for a, b in zip(cg_gradient, cost_gradient(y, problem)):
@@ -153,24 +156,16 @@ def test_the_solvers_model_has_the_costs_gradient(x64, default_model_dir, focal)
 
 
 def test_jit_equals_eager(x64, default_model_dir):
-    """The jitted fit equals the eager one, and so do the solver's steps alone (``fit_one(differentiable=False)``,
-    as IK, the refits, the hands and live run them)."""
+    """The jitted fit equals the eager one."""
     model = load64(default_model_dir)
     kp, init = synthetic64(model, seed=4)
     kp = kp.at[5].set(0.0)
     one = functools.partial(fit_frame, model, iterations=5)
     eager, jitted = one(kp, init), jit_fast_compile(one)(kp, init)
-    km, lens = fitting.openpose_keypoint_model(model), fitting.lens_arrays(None, None, jnp.float64)
-    steps = jit_fast_compile(lambda kp, pose, betas: fitting.fit_one(km, kp, pose, betas, None, lens,
-                                                            fitting.FitConfig(iterations=5), differentiable=False))
-    for other in (jitted, steps(kp, init.full_pose(), init.betas)):
-        for a, b in zip(jax.tree.leaves(eager), jax.tree.leaves(other)):
-            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+    for a, b in zip(jax.tree.leaves(eager), jax.tree.leaves(jitted)):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
     assert int(eager.status) == fitting.OK and not bool(eager.converged) and int(eager.steps) == 5  # cut short
     assert float(eager.reprojection_error_px) < 0.5 * float(eager.initial_reprojection_error_px)
-    with pytest.raises(ValueError, match="adjoint is for a differentiable fit"):  # it would be ignored
-        fitting.fit_one(km, kp, init.full_pose(), init.betas, None, lens, fitting.FitConfig(iterations=5),
-                        adjoint=optx.RecursiveCheckpointAdjoint(), differentiable=False)
 
 
 def test_a_solve_stalled_at_its_damping_cap_restarts_once_then_stops_unconverged(x64, default_model_dir):
@@ -186,8 +181,12 @@ def test_a_solve_stalled_at_its_damping_cap_restarts_once_then_stops_unconverged
                                          fitting.lens_arrays(None, None, jnp.float64), config, None, None)
     solver = levenberg_marquardt.LevenbergMarquardt(config, levenberg_marquardt.default_tolerance(jnp.float64))
     state = levenberg_marquardt.initial_state(problem, start, config)
-    assert not bool(solver.terminate(None, start, problem, {}, state, frozenset())[0])
-    step = jit_fast_compile(lambda y, state: solver.step(None, y, problem, {}, state, frozenset())[:2])
+
+    def fn(y, problem):  # the residuals as `optimistix.least_squares` gives them to its solver
+        return least_squares.residuals(y, problem, config), None
+
+    assert not bool(solver.terminate(fn, start, problem, {}, state, frozenset())[0])
+    step = jit_fast_compile(lambda y, state: solver.step(fn, y, problem, {}, state, frozenset())[:2])
     # a state no step can improve on (its cost 0), one refusal short of the cap, with a secant
     near_cap = eqx.tree_at(lambda s: (s.cost, s.damping, s.secant), state,
                            (jnp.zeros((), jnp.float64), jnp.asarray(levenberg_marquardt.MAX_DAMPING / 1.5),
@@ -195,9 +194,9 @@ def test_a_solve_stalled_at_its_damping_cap_restarts_once_then_stops_unconverged
     y, restarted = step(start, near_cap)
     assert float(restarted.damping) == 1.0 and float(restarted.growth) == 2.0 and bool(restarted.restarted)
     assert not np.asarray(restarted.secant).any() and not bool(levenberg_marquardt.stalled(restarted))
-    assert not bool(solver.terminate(None, y, problem, {}, restarted, frozenset())[0])
+    assert not bool(solver.terminate(fn, y, problem, {}, restarted, frozenset())[0])
     _, stalled = step(y, eqx.tree_at(lambda s: (s.damping, s.growth), restarted,
                                      (near_cap.damping, near_cap.growth)))
     assert float(stalled.damping) == levenberg_marquardt.MAX_DAMPING and bool(levenberg_marquardt.stalled(stalled))
-    stop, result = solver.terminate(None, y, problem, {}, stalled, frozenset())
+    stop, result = solver.terminate(fn, y, problem, {}, stalled, frozenset())
     assert bool(stop) and result == optx.RESULTS.nonlinear_max_steps_reached

@@ -26,7 +26,7 @@ SCRIPT = textwrap.dedent("""
     config = fitting.FitConfig(linear_solver="cg")  # the pipeline's steps (dense steps sharded: issue 25's note)
     sharded = fit(model, problem.keypoints, init=problem.init, config=config, iterations=20)
     assert len(batches) == 1  # one round: 20 steps
-    steps = batches[0][2]  # the compiled steps ran split over the frames: two on each device
+    steps = batches[0][1].steps  # the compiled steps ran split over the frames: two on each device
     assert len(steps.sharding.device_set) == 4 and [s.data.shape for s in steps.addressable_shards] == [(2,)] * 4
     # the same compiled batch with everything on one device
     fitting.shard_frames = lambda tree, n: jax.device_put(tree, jax.devices()[0])
@@ -35,7 +35,7 @@ SCRIPT = textwrap.dedent("""
     b = synthetic.openpose_projection(model, single.params, single.camera_scale, single.camera_trans)
     error_gap = np.abs(np.asarray(sharded.reprojection_error_px) - np.asarray(single.reprojection_error_px))
     print("max projection difference px", float(np.abs(a - b).max()), "error difference px", float(error_gap.max()))
-    assert len(batches[1][2].sharding.device_set) == 1
+    assert len(batches[1][1].steps.sharding.device_set) == 1
     assert np.array_equal(np.asarray(sharded.status), np.asarray(single.status))
     assert sharded.params.body_pose.dtype == np.float64
     assert error_gap.max() < 1e-8 and np.abs(a - b).max() < 1e-6

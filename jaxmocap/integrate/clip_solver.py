@@ -30,9 +30,11 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from jaxmocap.integrate.least_squares import Unknowns
-from jaxmocap.integrate.levenberg_marquardt import retract
+from jaxmocap.integrate.levenberg_marquardt import MAX_DAMPING, retract
 
-MAX_DAMPING = 1e10
+# The smallest entry of each part's diagonal (rotations, translations, shape) the damping scales by, relative to
+# that part's largest: an unknown no term constrains still gets a positive damping.
+DIAGONAL_FLOOR = 1e-9
 
 
 class Step(NamedTuple):
@@ -114,7 +116,7 @@ class ClipLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         gradient = keep_shape(transpose(r)[0])
         blocks = options["preconditioner"](y, args)
         diagonal = blocks.diagonal()
-        floor = jax.tree.map(lambda d: 1e-9 * jnp.max(d) + 1e-30, diagonal)
+        floor = jax.tree.map(lambda d: DIAGONAL_FLOOR * jnp.max(d) + jnp.finfo(d.dtype).tiny, diagonal)
         shift = jax.tree.map(lambda d, f: state.damping * jnp.maximum(d, f), diagonal, floor)
         if not self.fit_shared:
             shift = shift._replace(betas=jnp.ones_like(shift.betas))

@@ -88,26 +88,19 @@ def default_pose(dtype=jnp.float32) -> Float[Array, "55 3"]:
 
 
 def fit_one(km: KeypointModel, keypoints, pose, betas, camera, lens, config: FitConfig, free=None,
-            fit_betas=None, adjoint=None, differentiable: bool = True) -> FitResult:
+            fit_betas=None, adjoint=None) -> FitResult:
     """`fit_frame` of one frame from its full pose ``(55, 3)`` with its keypoint model ``km`` made beforehand
     (`openpose_keypoint_model`); ``camera`` (3,) or None (fitted to the start); ``lens`` (`lens_arrays`):
     (1 / focal length, principal point), 1 / focal length 0 for weak perspective; ``free`` (55,) 1 for the joints
-    fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`;
-    ``differentiable`` False: the same fit without a way for gradients through it (`levenberg_marquardt.run`).
+    fitted (default all), ``fit_betas`` 1 to fit the shape (default); ``adjoint`` as in `fit_frame`.
     Matrix products in full float32 on every device: a GPU's default TF32 ends the fit worse at the same speed
     (docs/BENCHMARKS.md, "On a GPU")."""
-    if adjoint is not None and not differentiable:
-        raise ValueError("adjoint is for a differentiable fit: fit_one(differentiable=False) takes none")
     with jax.default_matmul_precision("highest"):
-        return _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint, differentiable)
+        return _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint)
 
 
-def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint, differentiable
-             ) -> FitResult:
+def _fit_one(km, keypoints, pose, betas, camera, lens, config, free, fit_betas, adjoint) -> FitResult:
     problem, start, camera = _problem(km, keypoints, pose, betas, camera, lens, config, free, fit_betas)
-    if not differentiable:
-        y, converged, steps = levenberg_marquardt.run(problem, start, config)
-        return _result(problem, start, camera, y, converged, True, steps)
     solution = levenberg_marquardt.solve(problem, start, config, adjoint)
     converged = solution.result == optx.RESULTS.successful
     solved = converged | (solution.result == optx.RESULTS.nonlinear_max_steps_reached)
@@ -216,9 +209,14 @@ def _start_batch(km, keypoints, pose, betas, camera, free, lens, config: FitConf
 
 
 @disk_jit(static_argnames="config")
-def _advance_batch(km, problem, y, state, steps, config: FitConfig):
-    return _frames(lambda p, *rest: levenberg_marquardt.advance(p._replace(km=km), *rest, config=config),
-                   problem, y, state, steps)
+def _advance_batch(km, problem, y, state, until, config: FitConfig):
+    """Each frame's solve resumed from ``state`` until it is `levenberg_marquardt.finished` or its step count
+    reaches ``until`` (``config.iterations``: the most steps this takes): the points and the states."""
+    def one(p, y, state, until):
+        solution = levenberg_marquardt.solve(p._replace(km=km), y, config, resume=state, until=until)
+        return solution.value, solution.state
+
+    return _frames(one, problem, y, state, until)
 
 
 @disk_jit
@@ -239,23 +237,22 @@ def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progre
         return map_in_buckets(lambda chunk, n: jax.tree.map(keep, fn(*shard_frames(chunk, _rows(chunk)))), tree,
                               BUCKETS)
 
-    program = dataclasses.replace(config, iterations=0)  # the cap is this loop's: another compiles nothing new
+    program = dataclasses.replace(config, iterations=ROUND_STEPS)  # a round's steps; the cap is this loop's
     problem, start, camera, state = batches(
         lambda *chunk: _start_batch(km, *chunk, lens, program, fixed_shape), frames)
     y = jax.tree.map(np.copy, start)  # (its rows are overwritten round by round; the start's error reads start)
-    steps, done = np.zeros(len(frames[0]), np.int32), np.zeros(len(frames[0]), bool)
+    done = np.zeros(len(frames[0]), bool)
     while (active := np.flatnonzero(~done)).size:
-        budget = np.minimum(ROUND_STEPS, config.iterations - steps[active]).astype(np.int32)
+        until = np.minimum(state.steps[active] + ROUND_STEPS, config.iterations).astype(np.int32)
         picked = jax.tree.map(lambda a: a[active], (problem, y, state))
-        moved = batches(lambda *chunk: _advance_batch(km, *chunk, program), (*picked, budget))
-        for whole, part in zip(jax.tree.leaves((y, state)), jax.tree.leaves(moved[:2])):
+        moved = batches(lambda *chunk: _advance_batch(km, *chunk, program), (*picked, until))
+        for whole, part in zip(jax.tree.leaves((y, state)), jax.tree.leaves(moved)):
             whole[active] = part
-        steps[active] += moved[2]
-        done[active] = levenberg_marquardt.finished(state)[active] | (steps[active] >= config.iterations)
+        done[active] = levenberg_marquardt.finished(state)[active] | (state.steps[active] >= config.iterations)
         if progress is not None:
             progress(int(done[active].sum()))
-    return batches(lambda *chunk: _result_batch(km, *chunk), (problem, start, camera, y, state.converged, steps),
-                   keep=jnp.asarray)
+    return batches(lambda *chunk: _result_batch(km, *chunk),
+                   (problem, start, camera, y, state.converged, state.steps), keep=jnp.asarray)
 
 
 def full_pose_of(params: SMPLXParams) -> Float[Array, "T 55 3"]:

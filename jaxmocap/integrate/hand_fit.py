@@ -118,7 +118,7 @@ def hand_fit_from(km: KeypointModel, side, keypoints, pose, fit_config=HAND_FIT)
     betas = jnp.zeros(km.body.num_betas, dtype)
     lens = (jnp.zeros((), dtype), jnp.zeros(2, dtype))
     fitted = fit_one(km, keypoints, pose, betas, None, lens, fit_config, free=ids.free,
-                     fit_betas=jnp.zeros((), dtype), differentiable=False)
+                     fit_betas=jnp.zeros((), dtype))
     out = fitted.params.full_pose()
     rest_wrist = km.body.joint_template[ids.wrist, :2]
     return HandFit(out[ids.wrist], out[ids.fingers], fitted.camera_scale,

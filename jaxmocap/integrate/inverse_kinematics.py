@@ -80,7 +80,7 @@ def ik_one(km, targets, conf, theta, betas, free_joints, fit_betas, config, prio
     problem = least_squares.Problem(km, targets, conf, centre, betas, prior, jnp.ones((), theta.dtype), free_joints,
                                     fit_betas, jnp.zeros((), theta.dtype), jnp.zeros(3, theta.dtype))
     start = least_squares.Unknowns(theta, betas, jnp.concatenate([jnp.zeros(1, theta.dtype), offset]))
-    out, _, _ = levenberg_marquardt.run(problem, start, config)  # (nothing differentiates IK)
+    out = levenberg_marquardt.solve(problem, start, config).value
     pose, betas_out = least_squares.pose_and_shape(out, problem)
     cam = jnp.concatenate([jnp.exp(out.camera[:1]), out.camera[1:]])
     ok = (jnp.sum(conf > 0) >= 3) & jnp.all(jnp.isfinite(pose)) & jnp.all(jnp.isfinite(cam))

@@ -24,7 +24,9 @@ aligned over a whole step, where axis-angle steps drift off that valley.
 Both leave out the millimetre terms of blended skinning and pose blend shapes from ``H`` (cheaper, still
 positive semi-definite); the gradient ``g`` is the cost's exact one. Gradients through `solve` come from
 implicit differentiation (`optimistix.ImplicitAdjoint`, default) of the cost's optimality condition, exact where
-the solve converged; ``adjoint=optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps taken.
+the solve converged; ``adjoint=optimistix.RecursiveCheckpointAdjoint()`` differentiates the steps taken. Every
+solve goes through `optimistix.least_squares` (`solve`), also one run in pieces between which a batch sets aside
+its frames that are done (``resume`` and ``until``: `fitting.fit`).
 """
 
 from __future__ import annotations
@@ -58,6 +60,12 @@ from jaxmocap.integrate.least_squares import (
 from smplx_jax import rotations
 
 MAX_DAMPING = 1e10  # beyond it steps are nothing; the damping stays finite
+# The smallest diagonal entry a damped step scales by, relative to the largest: an unknown no term constrains still
+# gets a positive damping (a floor far below any real entry's, which it leaves alone).
+DIAGONAL_FLOOR = 1e-30
+# The conjugate-gradient system's ridge, relative to each diagonal entry plus one: positive definite where the
+# damping and a diagonal entry are both zero.
+CG_RIDGE = 1e-9
 
 
 def _dot(a: Unknowns, b: Unknowns):
@@ -231,7 +239,7 @@ def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig, seca
     that is positive definite)."""
     if model.dense is not None:
         diagonal = jnp.diag(model.dense)
-        damped = model.dense + jnp.diag(damping * jnp.maximum(diagonal, 1e-30 * diagonal.max()))
+        damped = model.dense + jnp.diag(damping * jnp.maximum(diagonal, DIAGONAL_FLOOR * diagonal.max()))
         # whether H + S is positive definite, then the factor of the matrix chosen (not of both under a `where`:
         # the failed one's NaNs would reach the gradient of the steps)
         augmented = damped + secant
@@ -239,7 +247,7 @@ def _step(model: LocalModel, damping, like: Unknowns, config: SolverConfig, seca
         factor = jnp.linalg.cholesky(jnp.where(use, augmented, damped))
         flat = -jax.scipy.linalg.cho_solve((factor, True), _flat(model.gradient, config))
         return _unflat(flat, like, config), use
-    shift = jax.tree.map(lambda d: damping * d + 1e-9 * (1.0 + d), model.diagonal)
+    shift = jax.tree.map(lambda d: damping * d + CG_RIDGE * (1.0 + d), model.diagonal)
     structure = jax.eval_shape(lambda: like)
     psd = lx.positive_semidefinite_tag
     operator = lx.FunctionLinearOperator(
@@ -256,10 +264,10 @@ def updated_secant(secant: Float[Array, "n n"], step: Float[Array, "n"], gradien
     ``sum_i r_i d2r_i`` that the Gauss-Newton matrix leaves out, after a step ``s``: sized down by
     ``min(1, |s^T y#| / |s^T S s|)``, then the symmetric rank-two change closest to it with ``(H_GN + S) s = y``
     (``y`` the gradient's change, ``y# = y - H_GN s`` the part ``S`` must explain). Unchanged where ``s^T y`` is
-    not positive."""
+    not positive beyond its rounding (the dtype's epsilon times ``|s| |y|``)."""
     s, y = step, gradient_change
     sy = s @ y
-    ok = sy > 1e-12 * jnp.sqrt((s @ s) * (y @ y))
+    ok = sy > jnp.finfo(sy.dtype).eps * jnp.sqrt((s @ s) * (y @ y))
     ssecs = s @ (secant @ s)
     size = jnp.minimum(1.0, jnp.abs(s @ (y - gauss_newton_change)) / jnp.where(ssecs != 0, jnp.abs(ssecs), 1.0))
     sized = jnp.where(ssecs != 0, size, 1.0) * secant
@@ -284,9 +292,9 @@ def retract(y: Unknowns, delta: Unknowns) -> Unknowns:
     return Unknowns(pose, y.betas + delta.betas, y.camera + delta.camera)
 
 
-def cost_of(y: Unknowns, problem: Problem, config: SolverConfig):
-    """The cost at ``y``: half the sum of squares of `residuals`."""
-    return 0.5 * sum(jnp.sum(part * part) for part in residuals(y, problem, config))
+def _cost(fn, y, args) -> Float[Array, ""]:
+    """Half the sum of squares of ``fn``'s residuals at ``y``."""
+    return 0.5 * sum(jnp.sum(part * part) for part in jax.tree.leaves(fn(y, args)[0]))
 
 
 class _State(NamedTuple):
@@ -300,13 +308,19 @@ class _State(NamedTuple):
     stepped: Bool[Array, ""]  # whether the last step was taken (the pair then updates S)
     stiff: Bool[Array, "L"]  # bending limits a refused step crossed, while within BEND_MARGIN inside and pressed
     restarted: Bool[Array, ""]  # whether it has stalled once and started again (`stalled`)
+    steps: Int[Array, ""]  # steps taken since the solve began (resumed solves go on counting)
 
 
 class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
-    """Levenberg-Marquardt on `local_model` (the problem is the solve's ``args``), dense steps on ``H + S`` with
-    ``S`` the residuals' curvature estimated from the steps taken (`updated_secant`; halved after a step it
-    mispredicted, left out where ``H + S`` is not positive definite); converged when a step at damping at most 1
-    predicts a relative decrease of the cost of at most ``rtol``."""
+    """Levenberg-Marquardt for `least_squares`' problems, through `optimistix.least_squares`: ``fn`` is `residuals`
+    (a step is judged by the cost of ``fn``), ``args`` the `Problem`, whose analytic model (`local_model`) gives
+    each step; dense steps on ``H + S`` with ``S`` the residuals' curvature estimated from the steps taken
+    (`updated_secant`; halved after a step it mispredicted, left out where ``H + S`` is not positive definite);
+    converged when a step at damping at most 1 predicts a relative decrease of the cost of at most ``rtol``.
+
+    ``options``: ``"resume"``, a state a solve of the same problem stopped in (`solve`'s ``resume``), to go on
+    from instead of starting afresh; ``"until"``, the step count (since the solve began) at which it pauses.
+    ``tags`` are not used: the problem's structure is the model's own."""
 
     config: SolverConfig = eqx.field(static=True)
     rtol: float
@@ -314,13 +328,15 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     norm: Callable = optx.max_norm  # unused
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        cost = cost_of(y, args, self.config)
+        if options.get("resume") is not None:
+            return options["resume"]
+        cost = _cost(fn, y, args)
         one = jnp.ones((), cost.dtype)
         n = _flat(y, self.config).shape[0] if self.config.linear_solver == "cholesky" else 0
         zero = jnp.zeros(n, cost.dtype)
         no = jnp.array(False)
         return _State(cost, self.config.initial_damping * one, 2.0 * one, no, jnp.zeros((n, n), cost.dtype), zero,
-                      zero, no, jnp.zeros(len(BEND_LIMITS), bool), no)
+                      zero, no, jnp.zeros(len(BEND_LIMITS), bool), no, jnp.zeros((), jnp.int32))
 
     def step(self, fn, y, args, options, state, tags):
         model = local_model(y, args, self.config, state.stiff)
@@ -335,7 +351,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             flat = _flat(delta, self.config)
             predicted = predicted - 0.5 * jnp.where(augmented, flat @ (secant @ flat), 0.0)
         trial = retract(y, delta)
-        cost = cost_of(trial, args, self.config)
+        cost = _cost(fn, trial, args)
         accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
         ratio = (state.cost - cost) / predicted
         converged = (predicted <= self.rtol * state.cost) & (state.damping <= 1.0)
@@ -354,11 +370,12 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         new = _State(jnp.where(accept, cost, state.cost), jnp.where(restart, 1.0, jnp.minimum(damping, MAX_DAMPING)),
                      jnp.where(accept | restart, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged,
                      jnp.where(restart, 0.0, secant), last_step, last_gradient, accept, stiff,
-                     state.restarted | restart)
+                     state.restarted | restart, state.steps + 1)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):
-        stop = finished(state)  # optimistix goes on while the result is successful
+        until = options.get("until")
+        stop = finished(state) | (False if until is None else state.steps >= until)
         return stop, optx.RESULTS.where(stop & ~state.converged, optx.RESULTS.nonlinear_max_steps_reached,
                                         optx.RESULTS.successful)
 
@@ -391,41 +408,23 @@ def _solver(config: SolverConfig, dtype) -> LevenbergMarquardt:
     return LevenbergMarquardt(config, config.tolerance or default_tolerance(dtype))
 
 
-def solve(problem: Problem, y0: Unknowns, config: SolverConfig, adjoint: optx.AbstractAdjoint | None = None
-          ) -> optx.Solution:
-    """Minimise the cost of `residuals` from ``y0`` (`LevenbergMarquardt`, at most ``config.iterations`` steps;
-    ``result`` successful when converged, ``nonlinear_max_steps_reached`` otherwise; no exception under
-    `jax.vmap`). ``adjoint``: how gradients go through the solve (default `optimistix.ImplicitAdjoint`)."""
-    return optx.least_squares(jax.tree_util.Partial(residuals, config=config), _solver(config, y0.camera.dtype),
-                              y0, problem, max_steps=config.iterations, throw=False,
-                              adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
-
-
-def run(problem: Problem, y0: Unknowns, config: SolverConfig) -> tuple[Unknowns, Bool[Array, ""], Int[Array, ""]]:
-    """`solve`'s steps without optimistix's wrapper and adjoint, for solves nothing differentiates: the same steps
-    (in float32 up to the rounding of another compiled program), traced and compiled 10-15% faster. Returns the
-    point, whether it converged and the steps taken."""
-    y, state, steps = advance(problem, y0, initial_state(problem, y0, config), jnp.asarray(config.iterations), config)
-    return y, state.converged, steps
-
-
 def initial_state(problem: Problem, y0: Unknowns, config: SolverConfig) -> _State:
-    """The state `solve` starts from at ``y0`` (for `advance`)."""
-    return _solver(config, y0.camera.dtype).init(None, y0, problem, {}, None, None, frozenset())
+    """The state a solve of ``problem`` starts in at ``y0`` (`solve`'s ``resume``, for a solve run in pieces)."""
+    def fn(y, args):  # as `optimistix.least_squares` gives it to the solver: no aux
+        return residuals(y, args, config), None
+
+    return _solver(config, y0.camera.dtype).init(fn, y0, problem, {}, None, None, frozenset())
 
 
-def advance(problem: Problem, y: Unknowns, state: _State, steps: Int[Array, ""], config: SolverConfig
-            ) -> tuple[Unknowns, _State, Int[Array, ""]]:
-    """`solve`'s steps (without its adjoint) in pieces: at most ``steps`` more from ``(y, state)``, fewer once
-    `finished`; returns the point, the state and the steps taken. Between pieces, a batch can set aside its frames
-    that are done (`fitting.fit`)."""
-    solver = _solver(config, y.camera.dtype)
-
-    def body(carry):
-        taken, y, state = carry
-        y, state, _ = solver.step(None, y, problem, {}, state, frozenset())
-        return taken + 1, y, state
-
-    taken, y, state = jax.lax.while_loop(lambda c: (c[0] < steps) & ~finished(c[2]), body,
-                                         (jnp.zeros((), steps.dtype), y, state))
-    return y, state, taken
+def solve(problem: Problem, y0: Unknowns, config: SolverConfig, adjoint: optx.AbstractAdjoint | None = None,
+          resume: _State | None = None, until: Int[Array, ""] | None = None) -> optx.Solution:
+    """Minimise the cost of `residuals` from ``y0`` by `optimistix.least_squares` (`LevenbergMarquardt`, at most
+    ``config.iterations`` steps; ``result`` successful when converged, ``nonlinear_max_steps_reached`` otherwise; no
+    exception under `jax.vmap`). ``adjoint``: how gradients go through the solve (default
+    `optimistix.ImplicitAdjoint`). In pieces: ``resume`` a state from `initial_state` or a previous piece's
+    ``Solution.state`` (with that piece's value as ``y0``), ``until`` the step count at which this piece pauses
+    (`finished` says whether the solve is done); the pieces take the steps one solve would."""
+    options = {"resume": resume, "until": until}
+    return optx.least_squares(jax.tree_util.Partial(residuals, config=config), _solver(config, y0.camera.dtype),
+                              y0, problem, options=options, max_steps=config.iterations, throw=False,
+                              adjoint=optx.ImplicitAdjoint() if adjoint is None else adjoint)
