@@ -9,7 +9,6 @@ hundred operations one by one (slower both the first time and after: docs/BENCHM
 Inside a caller's ``jit``, ``vmap`` or ``grad`` they are traced as any function is.
 """
 
-import functools
 from typing import NamedTuple
 
 import jax
@@ -54,8 +53,8 @@ class _Levels(NamedTuple):
     place: tuple[int, ...]
 
 
-@functools.lru_cache(maxsize=None)
 def _levels(parents: tuple[int, ...]) -> _Levels:
+    """The joints grouped by depth in the tree (found as a function is traced: no program holds it)."""
     depth = [0] * len(parents)
     for j in range(1, len(parents)):
         depth[j] = depth[parents[j]] + 1

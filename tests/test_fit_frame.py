@@ -168,6 +168,28 @@ def test_jit_equals_eager(x64, default_model_dir):
     assert float(eager.reprojection_error_px) < 0.5 * float(eager.initial_reprojection_error_px)
 
 
+def test_a_solve_paused_and_resumed_takes_the_steps_of_one_solve(x64, default_model_dir):
+    """`levenberg_marquardt.solve` paused at a step count (``until``) and resumed from its state (``resume``), as
+    `fit`'s rounds run it, lands where one solve does, step for step."""
+    model = load64(default_model_dir)
+    km = fitting.openpose_keypoint_model(model)
+    kp, init = synthetic64(model, seed=5)
+    config = fitting.FitConfig(iterations=30)
+    problem, start, _ = fitting._problem(km, kp, init.full_pose(), init.betas, None,
+                                         fitting.lens_arrays(None, None, jnp.float64), config, None, None)
+    piece = jit_fast_compile(lambda y, state, until: (lambda s: (s.value, s.state))(
+        levenberg_marquardt.solve(problem, y, config, resume=state, until=until)))
+    first = levenberg_marquardt.initial_state(problem, start, config)
+    whole, whole_state = piece(start, first, jnp.asarray(30))
+    y, state = start, first
+    for until in (7, 19, 30):
+        y, state = piece(y, state, jnp.asarray(until))
+        assert int(state.steps) == min(until, int(whole_state.steps))
+    assert int(whole_state.steps) > 19
+    for a, b in zip(jax.tree.leaves((whole, whole_state)), jax.tree.leaves((y, state))):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
 def test_a_solve_stalled_at_its_damping_cap_restarts_once_then_stops_unconverged(x64, default_model_dir):
     """Refused steps that raise the damping to its cap start the solve again at damping 1 without the secant ``S``
     (the refusals that shrank ``S`` ran the damping past every step that lowers the cost); the second time it stops

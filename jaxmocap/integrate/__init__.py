@@ -1,4 +1,5 @@
-"""Integration of body and hands into one SMPL-X body per frame (FrankMocap section 3.3), batched over frames.
+"""Integration of body and hands into one SMPL-X body per frame (FrankMocap section 3.3), batched over frames, and
+of each person's whole clip as one fit, standing on the floor.
 
     from jaxmocap.integrate import copy_paste, fit, fit_frame, smooth_params
     params = jax.vmap(copy_paste, in_axes=(None, 0, 0, 0, 0, 0))(model, body, lhand, lwrist, rhand, rwrist)
@@ -7,15 +8,16 @@
     clip = fit_clip(model, keypoints, init, focal_length=f, principal_point=c, fps=60.0, keypoint_sigma_px=sigma)
     smoothed = smooth_params(result.params, result.valid)
 
-Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `fitting` (2D keypoints
--> pose, shape, camera), `clip` (one person's whole clip as one problem: one shape, the 3D landmarks and the motion
-in every frame) with `clip_solver` (its matrix-free solver), `banded` (block-banded systems over frames),
-`clip_start` (each limb's depth in its start chosen over the whole clip), `hand_clip` (one hand's frames as one
-problem, for hands on their own) and `keypoint_start` (a start from 2D keypoints alone: the default pose turned as
-the torso shows), `least_squares` (one body's robust least squares), `levenberg_marquardt` (its optimistix solver:
-dense or CG steps, a stopping rule), `keypoints` (model keypoints with an analytic Jacobian), `mat3` (3x3 kernels),
-`eft` (exemplar fine-tuning of the body regressor), `smooth` (temporal), `camera`, `motion_arrays` (fits ->
-motion.npz arrays), `synthetic` (problems with known answers for tests and benchmarks).
+Modules: `copy_and_paste` (wrist conversion), `inverse_kinematics` (3D landmarks -> pose), `fitting` (2D keypoints ->
+pose, shape, camera), `clip` (one person's whole clip as one problem: one shape, the 3D landmarks and the motion in
+every frame) with `clip_solver` (its matrix-free solver), `banded` (block-banded systems over frames), `clip_start`
+(each limb's depth in its start chosen over the whole clip), `hand_clip` (one hand's frames as one problem, for hands on
+their own) and `keypoint_start` (a start from 2D keypoints alone: the default pose turned as the torso shows),
+`least_squares` (one body's robust least squares), `levenberg_marquardt` (its optimistix solver: dense or CG steps, a
+stopping rule), `keypoints` (model keypoints with an analytic Jacobian), `mat3` (3x3 kernels), `ground` (the floor, the
+feet's contacts, the world frame), `hand_fit` (a hand on its own: IK and fit), `eft` (exemplar fine-tuning of the body
+regressor), `smooth` (temporal), `camera`, `motion_arrays` (fits -> motion.npz arrays), `synthetic` (problems with known
+answers for tests and benchmarks).
 """
 
 from jaxmocap.integrate.camera import project, weak_perspective_from_points

@@ -4,13 +4,13 @@
     report = run(RunConfig("video.mp4", exports=("bvh",)), "out")
 
 Modules: `config` (`RunConfig`), `entry` (`run`, every mode's entry), `job` (`run_bodies`, ``--mode whole`` and
-``body``, which reads as its stages), `hands_job` (`run_hands`, ``--mode hands``: hands alone, ``hands.npz``),
-`stages` (observations -> initial bodies -> the clip fit -> motion arrays), `whole_clip` (each person's whole
-clip as one fit, in windows by frame number), `regress` (FrankMocap's regressors in place of IK and the clip fit),
-`records` (what the stages hand each other), `report` (`RunReport`), `chunks` (frames in chunks and the resumable
-chunk store), `outputs` (OpenPose JSON, overlay, exports, FrankMocap pickles), `observe` (the detector's person
-as arrays, repaired), `fit_folder` (``jaxmocap fit``), `clock` (stage timing), `exemplar` and `hand_boxes` (parts
-of the regressors' path). Imports run one way: `entry` -> the jobs -> the rest.
+``body``, which reads as its stages), `hands_job` (`run_hands`, ``--mode hands``: hands alone, ``hands.npz``), `stages`
+(observations -> initial bodies -> the clip fit -> motion arrays), `whole_clip` (each person's whole clip as one fit, in
+windows by frame number), `regress` (FrankMocap's regressors in place of IK and the clip fit), `tracks` (what the stages
+hand each other), `merge_tracks` (one person's tracks joined), `report` (`RunReport`), `chunks` (frames in chunks and
+the resumable chunk store), `outputs` (OpenPose JSON, overlay, exports, FrankMocap pickles), `observe` (the detector's
+person as arrays, repaired), `fit_folder` (``jaxmocap fit``), `stage_clock` (stage timing), `exemplar` and `hand_boxes`
+(parts of the regressors' path). Imports run one way: `entry` -> the jobs -> the rest.
 """
 
 from jaxmocap.pipeline.config import RunConfig
