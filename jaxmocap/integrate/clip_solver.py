@@ -30,7 +30,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from jaxmocap.integrate.least_squares import Unknowns
-from jaxmocap.integrate.levenberg_marquardt import MAX_DAMPING, retract
+from jaxmocap.integrate.levenberg_marquardt import MAX_DAMPING, nielsen_damping, retract
 
 # The smallest entry of each part's diagonal (rotations, translations, shape) the damping scales by, relative to
 # that part's largest: an unknown no term constrains still gets a positive damping.
@@ -142,10 +142,8 @@ class ClipLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         # decrement): unlike the step's own, it does not shrink when the conjugate gradients fall short
         decrement = 0.5 * _dot(gradient, inverse(gradient))
         converged = (decrement <= self.tolerance) & (state.damping <= 1.0)
-        damping = jnp.where(accept, state.damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3),
-                            state.damping * state.growth)
-        new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING),
-                     jnp.where(accept, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged)
+        damping, growth = nielsen_damping(state.damping, state.growth, accept, ratio)
+        new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING), growth, converged)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):

@@ -66,6 +66,15 @@ DIAGONAL_FLOOR = 1e-30
 # The conjugate-gradient system's ridge, relative to each diagonal entry plus one: positive definite where the
 # damping and a diagonal entry are both zero.
 CG_RIDGE = 1e-9
+MAX_GROWTH = 1024.0  # the most Nielsen's rule multiplies the damping by after a run of refused steps
+
+
+def nielsen_damping(damping, growth, accept, ratio):
+    """Nielsen's rule: after a step whose actual decrease is ``ratio`` times the predicted one, the damping and
+    its growth factor. Taken: the damping times ``max(1/3, 1 - (2 ratio - 1)^3)``, the factor back to 2; refused:
+    the damping times the factor, which doubles (to `MAX_GROWTH`)."""
+    return (jnp.where(accept, damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3), damping * growth),
+            jnp.where(accept, 2.0, jnp.minimum(2.0 * growth, MAX_GROWTH)))
 
 
 def _dot(a: Unknowns, b: Unknowns):
@@ -355,8 +364,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
         ratio = (state.cost - cost) / predicted
         converged = (predicted <= self.rtol * state.cost) & (state.damping <= 1.0)
-        damping = jnp.where(accept, state.damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3),
-                            state.damping * state.growth)
+        damping, growth = nielsen_damping(state.damping, state.growth, accept, ratio)
         if model.dense is not None:
             secant = jnp.where(~accept & augmented & (ratio < 0.25), 0.5 * secant, secant)
             last_step = jnp.where(accept, flat, state.last_step)
@@ -368,7 +376,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             last_step, last_gradient, stiff = state.last_step, state.last_gradient, state.stiff
         restart = (damping >= MAX_DAMPING) & ~state.restarted
         new = _State(jnp.where(accept, cost, state.cost), jnp.where(restart, 1.0, jnp.minimum(damping, MAX_DAMPING)),
-                     jnp.where(accept | restart, 2.0, jnp.minimum(2.0 * state.growth, 1024.0)), converged,
+                     jnp.where(restart, 2.0, growth), converged,
                      jnp.where(restart, 0.0, secant), last_step, last_gradient, accept, stiff,
                      state.restarted | restart, state.steps + 1)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
