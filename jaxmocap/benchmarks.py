@@ -10,10 +10,13 @@ BENCH_DIR = Path(__file__).resolve().parents[1] / "bench"
 
 
 def available() -> list[str]:
+    """The benchmarks of the source checkout's ``bench/`` folder, by name."""
     return sorted(p.stem for p in BENCH_DIR.glob("*.py") if not p.stem.startswith("_"))
 
 
 def run_benchmarks(names, out_dir: Path, quick: bool = False) -> None:
+    """Run the benchmarks ``names`` (all when empty) one after another in this process, each writing its
+    JSON into ``out_dir``; `InputError` without a ``bench/`` folder or for an unknown name."""
     if not BENCH_DIR.is_dir():
         raise InputError(f"no bench/ folder beside the package ({BENCH_DIR}): benchmarks run from a source checkout")
     names = names or available()

@@ -348,6 +348,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """The ``jaxmocap`` command on ``argv`` (default ``sys.argv[1:]``); returns the exit code: 0 done, 2 bad input
+    (a one-line error), 130 / 143 interrupted by Ctrl-C / SIGTERM, 1 a batch with a failed video."""
     from smplx_jax import ModelFileError
 
     args = _parser().parse_args(argv)

@@ -13,6 +13,7 @@ from smplx_jax.atomic_files import atomic_write_bytes
 
 
 def file_sha256(path) -> str:
+    """The SHA-256 of the file at ``path`` (hex), read in 1 MiB blocks."""
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):

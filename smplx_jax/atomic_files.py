@@ -37,12 +37,14 @@ def atomic_path(path) -> Iterator[Path]:
 
 
 def atomic_write_bytes(path, data: bytes) -> Path:
+    """``data`` written to ``path`` atomically (`atomic_path`); returns the path."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
     return Path(path)
 
 
 def atomic_write_text(path, text: str) -> Path:
+    """``text`` written to ``path`` atomically as UTF-8 (`atomic_write_bytes`); returns the path."""
     return atomic_write_bytes(path, text.encode())
 
 

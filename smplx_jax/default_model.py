@@ -60,6 +60,8 @@ def generator_id() -> str:
 
 
 def cache_root() -> Path:
+    """Where jaxmocap keeps what it makes or fetches once (``$JAXMOCAP_CACHE``, default
+    ``~/.cache/jaxmocap``)."""
     env = os.environ.get("JAXMOCAP_CACHE")
     return Path(env) if env else Path.home() / ".cache" / "jaxmocap"
 

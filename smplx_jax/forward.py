@@ -22,6 +22,8 @@ from smplx_jax.rotations import rotvec_to_rotmat
 
 
 class Output(NamedTuple):
+    """One body from `forward`: its mesh and its 127 joints (SMPL-X order), metres."""
+
     vertices: Float[Array, "V 3"]
     joints: Float[Array, "127 3"]
 

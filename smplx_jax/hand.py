@@ -43,6 +43,8 @@ class HandModel:
 
 
 class HandOutput(NamedTuple):
+    """One hand from `hand_forward`: its mesh and 21 joints (OpenPose hand order), metres."""
+
     vertices: Float[Array, "N 3"]
     joints: Float[Array, "21 3"]  # OpenPose hand order
 

@@ -109,10 +109,12 @@ def main_output(out: Path, mode: str) -> Path:
 
 
 def mark_path(out_dir: Path, name: str) -> Path:
+    """Where a batch keeps the mark of its video ``name`` (``<out>/.jaxmocap_batch/<name>.json``)."""
     return Path(out_dir) / MARKS / f"{name}.json"
 
 
 def write_mark(path: Path, key: dict, record: VideoRecord) -> Path:
+    """A video's mark (its settings ``key`` and its `VideoRecord`) written atomically to ``path``."""
     return atomic_write_text(path, json.dumps({"key": key, "record": dataclasses.asdict(record)}, indent=1))
 
 

@@ -21,6 +21,7 @@ def read_manifest(path) -> list[str]:
 
 
 def is_url(source: str) -> bool:
+    """Whether ``source`` names a URL (``scheme://...``) rather than a file."""
     return "://" in source
 
 

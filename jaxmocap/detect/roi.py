@@ -26,6 +26,7 @@ class Rect(NamedTuple):
 
 
 def normalize_radians(angle: float) -> float:
+    """``angle`` wrapped into ``[-pi, pi)``."""
     return angle - 2 * math.pi * math.floor((angle + math.pi) / (2 * math.pi))
 
 

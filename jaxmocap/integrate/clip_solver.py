@@ -70,6 +70,7 @@ def moved(y, step: Step, fit_shared: bool):
 
 
 def cost_of(r) -> Float[Array, ""]:
+    """Half the sum of squares of every leaf of the residuals ``r``."""
     return 0.5 * sum(jnp.sum(leaf * leaf) for leaf in jax.tree.leaves(r))
 
 

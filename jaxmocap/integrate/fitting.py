@@ -256,11 +256,14 @@ def _solve_frames(km, frames, lens, config: FitConfig, fixed_shape: bool, progre
 
 
 def full_pose_of(params: SMPLXParams) -> Float[Array, "T 55 3"]:
+    """The ``(T, 55, 3)`` axis-angles of batched ``params`` (`SMPLXParams.full_pose` per frame)."""
     return jax.vmap(SMPLXParams.full_pose)(params)
 
 
 @functools.partial(jax.jit, static_argnames="num_expression")
 def params_from_full_pose(pose, betas, num_expression: int) -> SMPLXParams:
+    """Batched `SMPLXParams` from ``pose (T, 55, 3)`` and ``betas (T, B)`` (`keypoints.params_of` per frame;
+    zero expression of ``num_expression`` components, zero translation)."""
     return jax.vmap(params_of, in_axes=(0, 0, None))(pose, betas, num_expression)
 
 

@@ -250,6 +250,8 @@ class Linearization(NamedTuple):
 
 
 def linearize(km: KeypointModel, pose_rotvecs: Float[Array, "55 3"], betas: Float[Array, "B"]) -> Linearization:
+    """The keypoint map of ``km`` at ``pose_rotvecs`` and ``betas``: the keypoints and what their analytic
+    Jacobian needs (`Linearization`; used by `jvp`, `vjp` and `pose_jacobian`)."""
     body = km.body
     posed = _pose(km, pose_rotvecs, betas)
     g, p = posed.glob, posed.p

@@ -85,6 +85,8 @@ class SolverConfig:
 
 
 class Unknowns(NamedTuple):
+    """What a solve moves: the 55 joints' axis-angles, the shape, the camera (`project`)."""
+
     pose_rotvecs: Float[Array, "55 3"]
     betas: Float[Array, "B"]
     camera: Float[Array, "C"]  # log scale, then the D translations
@@ -107,6 +109,8 @@ class Problem(NamedTuple):
 
 
 class Residuals(NamedTuple):
+    """The residuals of one body (`residuals`), each in its unit (module docstring)."""
+
     data: Float[Array, "D K"]
     pose: Float[Array, "55 3"]
     betas: Float[Array, "B"]
@@ -152,6 +156,7 @@ def _sqrt_weight_jvp(primals, tangents):
 
 
 def pose_and_shape(y: Unknowns, problem: Problem):
+    """The pose and shape ``y`` stands for: the problem's own where a joint or the shape is not free."""
     pose = jnp.where(problem.free[:, None] > 0, y.pose_rotvecs, problem.pose0)
     return pose, jnp.where(problem.fit_betas > 0, y.betas, problem.betas0)
 

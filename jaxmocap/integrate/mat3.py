@@ -9,6 +9,7 @@ from smplx_jax.rotations import skew_polynomial
 
 
 def cross(a: Float[Array, "3 *N"], b: Float[Array, "3 *N"]) -> Float[Array, "3 *N"]:
+    """Cross products of 3-vectors stored coordinate-major (the first axis)."""
     return jnp.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
@@ -24,6 +25,7 @@ def matvec_t(m: Float[Array, "3 3 N"], v: Float[Array, "3 N"]) -> Float[Array, "
 
 
 def matmul(a: Float[Array, "3 3 N"], b: Float[Array, "3 3 N"]) -> Float[Array, "3 3 N"]:
+    """Products of 3x3 matrices stored with the batch last, ``(3, 3, N)``, written out (no batched GEMM)."""
     return jnp.stack([jnp.stack([a[i, 0] * b[0, k] + a[i, 1] * b[1, k] + a[i, 2] * b[2, k] for k in range(3)])
                       for i in range(3)])
 

@@ -42,6 +42,8 @@ def _expand(w, like):
 
 
 def smooth_linear(values: Float[Array, "T ..."], valid: Bool[Array, "T"], kernel=KERNEL) -> Float[Array, "T ..."]:
+    """``values`` averaged over time with ``kernel``, over the ``valid`` frames only (module docstring);
+    invalid frames are returned unchanged."""
     total = 0.0
     acc = jnp.zeros_like(values)
     for offset, w in _weights(valid, kernel):
@@ -77,4 +79,5 @@ def smooth_params(params: SMPLXParams, valid: Bool[Array, "T"], kernel=KERNEL) -
 
 
 def smooth_camera(scale: Float[Array, "T"], trans: Float[Array, "T 2"], valid: Bool[Array, "T"], kernel=KERNEL):
+    """A weak-perspective camera's ``scale`` and ``trans`` smoothed as `smooth_linear` does."""
     return smooth_linear(scale, valid, kernel), smooth_linear(trans, valid, kernel)

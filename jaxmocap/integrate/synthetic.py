@@ -20,6 +20,8 @@ IMAGE_SIZE = (1000, 1000)
 
 
 class Synthetic(NamedTuple):
+    """Frames with known answers (`make_problem`): the true bodies and cameras, their keypoints, a start."""
+
     truth: SMPLXParams  # (T,)
     camera_scale: np.ndarray  # (T,) (pinhole: focal length / the body origin's depth)
     camera_trans: np.ndarray  # (T, 2) (pinhole: where the body origin's pixel is)
@@ -66,6 +68,8 @@ def _params(theta, betas, num_expression):
 
 
 def openpose_projection(model: BodyModel, params: SMPLXParams, scale, trans) -> np.ndarray:
+    """The 67 OpenPose keypoints of batched ``params`` through weak-perspective cameras ``(T,)``, ``(T, 2)``:
+    pixels ``(T, 67, 2)``."""
     joints = body_joints(model, params)[:, np.asarray(constants.OPENPOSE67_FROM_SMPLX)]
     return np.asarray(scale)[:, None, None] * joints[..., :2] + np.asarray(trans)[:, None, :]
 
@@ -99,6 +103,8 @@ def make_problem(model: BodyModel, t: int, seed: int = 0, noise_px: float = 2.0,
 
 
 class SyntheticClip(NamedTuple):
+    """One body's clip with known answers (`make_clip`), through a pinhole camera."""
+
     pose: np.ndarray  # (T, 55, 3) axis-angles
     betas: np.ndarray  # (B,)
     transl: np.ndarray  # (T, 3) the body's origin in the camera frame, metres

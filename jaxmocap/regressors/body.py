@@ -17,12 +17,16 @@ ITERATIONS = 3
 
 @dataclasses.dataclass(frozen=True)
 class BodyConfig:
+    """FrankMocap's body regressor: the ResNet's depth, the regressor's hidden width, the betas it predicts."""
+
     depth: int = 50
     hidden: int = 1024
     num_betas: int = 10
 
 
 class BodyOutput(NamedTuple):
+    """The body regressor's prediction for N crops: SMPL joint rotations, shape and crop camera."""
+
     rotmats: Float[Array, "N 24 3 3"]  # SMPL joints; 0 is the global orientation (camera frame, y down)
     betas: Float[Array, "N 10"]
     camera: Float[Array, "N 3"]  # weak perspective [s, tx, ty] in the normalised crop

@@ -20,6 +20,9 @@ BODY_SCALE, HAND_MARGIN, MIN_BODY_CROP = 1.2, 0.3, 20
 
 
 class Window(NamedTuple):
+    """Where each of N crops lies in its image (module docstring): the region resized to ``SIZE`` x ``SIZE`` and
+    the part of it that holds image pixels."""
+
     origin: Int[np.ndarray, "N 2"]  # image pixel of the region's top-left (may be negative)
     size: Int[np.ndarray, "N 2"]  # region (width, height), resized to SIZE x SIZE
     content: Int[np.ndarray, "N 4"]  # x0, y0, x1, y1 (exclusive) of the image pixels kept; zeros elsewhere

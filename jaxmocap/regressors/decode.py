@@ -26,6 +26,8 @@ def mirror_hand_params(raw: Float[ArrayLike, "N 61"]) -> Float[Array, "N 61"]:
 
 
 class HandPrediction(NamedTuple):
+    """A hand regressor's prediction for N hands, decoded into the image and the hand's own side."""
+
     wrist_glob_rotvec: Float[Array, "N 3"]  # global wrist orientation (camera frame), for copy-and-paste
     hand_pose: Float[Array, "N 15 3"]  # absolute (mean hand added), of the hand's own side
     betas: Float[Array, "N 10"]
@@ -34,6 +36,8 @@ class HandPrediction(NamedTuple):
 
 
 class BodyPrediction(NamedTuple):
+    """The body regressor's prediction for N bodies as SMPL-X parameters, with their cameras and joints."""
+
     params: smplx_jax.SMPLXParams  # batched over N; hands at the model's mean hand until copy-and-paste
     camera: Float[Array, "N 3"]
     joints_2d: Float[Array, "N 127 2"]  # smplx joint order, image pixels

@@ -20,6 +20,8 @@ class Buffer(nnx.Variable):
 
 @dataclasses.dataclass(frozen=True)
 class HandConfig:
+    """FrankMocap's hand regressor: the ResNet's depth and the regressor's hidden width."""
+
     depth: int = 50
     hidden: int = 1024
 

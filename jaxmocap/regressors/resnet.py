@@ -15,6 +15,7 @@ _EXPANSION = {"basic": 1, "bottleneck": 4}
 
 
 def feature_width(depth: int) -> int:
+    """Channels of the pooled features of a ResNet of ``depth`` (18, 34: 512; 50: 2048)."""
     kind, _ = STAGES[depth]
     return 512 * _EXPANSION[kind]
 

@@ -30,6 +30,8 @@ class WeightsError(InputError):
 
 
 class Regressors(NamedTuple):
+    """FrankMocap's two networks, as `load` gives them."""
+
     hand: HandRegressor
     body: BodyRegressor
 
