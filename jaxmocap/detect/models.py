@@ -55,17 +55,11 @@ MODEL_FILES: dict[str, tuple[str, str]] = {
 
 
 NPM_PACKAGE = "@mediapipe/pose@0.5.1675469404"
-# file name -> (member path inside the npm tarball, sha256)
-NPM_FILES: dict[str, tuple[str, str]] = {
-    "pose_landmark_heavy.tflite": (
-        "package/pose_landmark_heavy.tflite",
-        "59e42d71bcd44cbdbabc419f0ff76686595fd265419566bd4009ef703ea8e1fe",
-    ),
-    "pose_landmark_lite.tflite": (
-        "package/pose_landmark_lite.tflite",
-        "f17bfbecadb61c3be1baa8b8d851cc6619c870a87167b32848ad20db306b9d61",
-    ),
-}
+# file name -> (member path inside the npm tarball: package/<name>, sha256)
+NPM_FILES: dict[str, tuple[str, str]] = {name: (f"package/{name}", sha256) for name, sha256 in (
+    ("pose_landmark_heavy.tflite", "59e42d71bcd44cbdbabc419f0ff76686595fd265419566bd4009ef703ea8e1fe"),
+    ("pose_landmark_lite.tflite", "f17bfbecadb61c3be1baa8b8d851cc6619c870a87167b32848ad20db306b9d61"),
+)}
 # BlazePose's landmark models (the same inputs and outputs), by the name ``--landmarks`` takes
 LANDMARK_MODELS = {"heavy": "pose_landmark_heavy.tflite", "full": "pose_landmark_full.tflite",
                    "lite": "pose_landmark_lite.tflite"}
