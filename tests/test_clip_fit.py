@@ -10,9 +10,10 @@ import pytest
 
 import smplx_jax
 from jaxmocap.integrate import clip, synthetic
-from jaxmocap.integrate.clip_solver import Step, cost_of, moved
+from jaxmocap.integrate.clip_solver import Step, moved
 from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.integrate.keypoints import params_of
+from jaxmocap.integrate.levenberg_marquardt import cost_of
 from smplx_jax.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
 FOCAL, CENTRE, FPS = 1500.0, np.array([960.0, 540.0]), 30.0

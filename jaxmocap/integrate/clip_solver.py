@@ -30,7 +30,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from jaxmocap.integrate.least_squares import Unknowns
-from jaxmocap.integrate.levenberg_marquardt import MAX_DAMPING, nielsen_damping, retract
+from jaxmocap.integrate.levenberg_marquardt import MAX_DAMPING, cost_of, nielsen_damping, retract
 
 # The smallest entry of each part's diagonal (rotations, translations, shape) the damping scales by, relative to
 # that part's largest: an unknown no term constrains still gets a positive damping.
@@ -67,11 +67,6 @@ def moved(y, step: Step, fit_shared: bool):
         y.pose_rotvecs, step.pose)
     return y._replace(pose_rotvecs=pose, transl=y.transl + step.transl,
                       betas=y.betas + step.betas if fit_shared else y.betas)
-
-
-def cost_of(r) -> Float[Array, ""]:
-    """Half the sum of squares of every leaf of the residuals ``r``."""
-    return 0.5 * sum(jnp.sum(leaf * leaf) for leaf in jax.tree.leaves(r))
 
 
 class _State(NamedTuple):

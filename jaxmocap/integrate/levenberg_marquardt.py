@@ -301,9 +301,9 @@ def retract(y: Unknowns, delta: Unknowns) -> Unknowns:
     return Unknowns(pose, y.betas + delta.betas, y.camera + delta.camera)
 
 
-def _cost(fn, y, args) -> Float[Array, ""]:
-    """Half the sum of squares of ``fn``'s residuals at ``y``."""
-    return 0.5 * sum(jnp.sum(part * part) for part in jax.tree.leaves(fn(y, args)[0]))
+def cost_of(r) -> Float[Array, ""]:
+    """Half the sum of squares of every leaf of the residuals ``r``."""
+    return 0.5 * sum(jnp.sum(leaf * leaf) for leaf in jax.tree.leaves(r))
 
 
 class _State(NamedTuple):
@@ -339,7 +339,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
     def init(self, fn, y, args, options, f_struct, aux_struct, tags):
         if options.get("resume") is not None:
             return options["resume"]
-        cost = _cost(fn, y, args)
+        cost = cost_of(fn(y, args)[0])
         one = jnp.ones((), cost.dtype)
         n = _flat(y, self.config).shape[0] if self.config.linear_solver == "cholesky" else 0
         zero = jnp.zeros(n, cost.dtype)
@@ -360,7 +360,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
             flat = _flat(delta, self.config)
             predicted = predicted - 0.5 * jnp.where(augmented, flat @ (secant @ flat), 0.0)
         trial = retract(y, delta)
-        cost = _cost(fn, trial, args)
+        cost = cost_of(fn(trial, args)[0])
         accept = jnp.isfinite(cost) & (cost < state.cost) & (predicted > 0)
         ratio = (state.cost - cost) / predicted
         converged = (predicted <= self.rtol * state.cost) & (state.damping <= 1.0)
