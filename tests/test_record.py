@@ -12,9 +12,12 @@ import numpy as np
 import pytest
 
 import smplx_jax
+from conftest import programs_lowered
 from jaxmocap.columns import Columns, write_npz
+from jaxmocap.integrate.ground import Floor
 from jaxmocap.live.causal import Solved
 from jaxmocap.live.record import JOURNAL, Recorder
+from jaxmocap.live.world import LiveWorld
 from jaxmocap.motion import read_motion
 
 LENS = (800.0, np.asarray([320.0, 240.0]))
@@ -25,8 +28,8 @@ def model():
     return smplx_jax.load_model(smplx_jax.default_model_path())
 
 
-def _recorder(folder, model, every_s=3600.0) -> Recorder:
-    return Recorder(folder, model, "0" * 64, LENS, 30.0, (640, 480), "full", every_s=every_s)
+def _recorder(folder, model, every_s=3600.0, world=None) -> Recorder:
+    return Recorder(folder, model, "0" * 64, LENS, 30.0, (640, 480), "full", every_s=every_s, world=world)
 
 
 def test_columns_written_as_numpy_writes_them(tmp_path):
@@ -132,3 +135,25 @@ def test_a_failed_write_is_raised_by_the_next_frame_and_at_close(tmp_path, model
     with pytest.raises(FileNotFoundError):
         recorder.close(60)
     assert len(read_motion(tmp_path / "motion.npz")["valid"]) == 1
+
+
+def test_a_flush_compiles_nothing_once_warmed_up(tmp_path, model):
+    """Flushes of any number of frames, the world keys of the whole recording included (its floor found), run only
+    programs `Recorder.warm_up` compiled before the session: one compiled by the writing thread takes the solve's
+    cores for seconds (each flush's world keys were one program for each length of the recording)."""
+    world = LiveWorld(model, LENS, 640)
+    world.floor = Floor(np.asarray([0.0, -1.0, 0.0]), 1.0)  # 1 m below the camera (y down)
+    world.camera_from_world = np.asarray([[1, 0, 0, 0], [0, -1, 0, 1], [0, 0, -1, 0], [0, 0, 0, 1]], np.float64)
+    recorder = _recorder(tmp_path, model, world=world)
+    recorder.warm_up()
+    rng, added = np.random.default_rng(4), 0
+    with programs_lowered() as lowered:
+        for count in (3, 20, 50, 100):
+            for _ in range(count):
+                recorder.add(added, added / 30, {0: _solved(model, rng)}, {0: rng.random((67, 3)).astype(np.float32)})
+                added += 1
+            recorder.flush()
+    assert lowered == []
+    recorder.close(60)
+    motion = read_motion(tmp_path / "motion.npz")
+    assert motion["world_transl"].shape == (added, 3) and np.isfinite(motion["world_global_orient"]).all()

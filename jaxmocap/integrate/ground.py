@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 from jaxtyping import Bool, Float
+from scipy.spatial.transform import Rotation
 
 import smplx_jax
 from jaxmocap.integrate.clip import FOOT_JOINTS, ClipGround
@@ -156,10 +157,13 @@ def world_pose(global_orient: Float[np.ndarray, "T 3"], transl: Float[np.ndarray
                pelvis: Float[np.ndarray, "T 3"], camera_from_world: Float[np.ndarray, "T 4 4"]):
     """``(world_global_orient, world_transl)``: the body in the world frame, from each frame's camera. The root
     turns about the rest pelvis ``J0 = pelvis - transl`` (its camera-frame position less ``transl``), so
-    ``world_transl`` is ``R^T (pelvis - t) - J0``."""
+    ``world_transl`` is ``R^T (pelvis - t) - J0``. A frame whose orientation is not finite gives NaN."""
     rotation, t = camera_from_world[:, :3, :3], camera_from_world[:, :3, 3]
-    root = np.asarray(smplx_jax.rotations.rotvec_to_rotmat(np.asarray(global_orient, np.float64)))
-    world_orient = np.asarray(smplx_jax.rotations.rotmat_to_rotvec(np.swapaxes(rotation, 1, 2) @ root))
+    global_orient = np.asarray(global_orient, np.float64)
+    finite = np.isfinite(global_orient).all(1)
+    root = Rotation.from_rotvec(np.where(finite[:, None], global_orient, 0.0)).as_matrix()
+    world_orient = np.where(finite[:, None], Rotation.from_matrix(np.swapaxes(rotation, 1, 2) @ root).as_rotvec(),
+                            np.nan)
     return world_orient, np.einsum("tji,tj->ti", rotation, pelvis - t) - (pelvis - transl)
 
 
@@ -168,7 +172,7 @@ def in_scene(points: Float[np.ndarray, "T *K 3"], scene_from_camera: Float[np.nd
     """Each frame's camera-frame ``points`` in the scene's frame (None: a static camera's, as they are)."""
     if scene_from_camera is None:
         return points
-    turn = np.asarray(smplx_jax.rotations.rotvec_to_rotmat(np.asarray(scene_from_camera, np.float64)))
+    turn = Rotation.from_rotvec(np.asarray(scene_from_camera, np.float64)).as_matrix()
     return np.einsum("tij,t...j->t...i", turn, points)
 
 
@@ -177,7 +181,7 @@ def cameras_from_world(scene_from_world: Float[np.ndarray, "4 4"], frames: int,
     """Each frame's ``camera_from_world``: the scene's transform seen from that frame's camera."""
     camera_from_scene = np.repeat(np.eye(4)[None], frames, 0)
     if scene_from_camera is not None:
-        turn = np.asarray(smplx_jax.rotations.rotvec_to_rotmat(np.asarray(scene_from_camera, np.float64)))
+        turn = Rotation.from_rotvec(np.asarray(scene_from_camera, np.float64)).as_matrix()
         camera_from_scene[:, :3, :3] = np.swapaxes(turn, 1, 2)
     return camera_from_scene @ scene_from_world
 

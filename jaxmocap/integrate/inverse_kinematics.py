@@ -17,6 +17,7 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from jaxmocap.buckets import map_in_buckets
 from jaxmocap.compile_cache import disk_jit
@@ -24,7 +25,6 @@ from jaxmocap.integrate import least_squares, levenberg_marquardt
 from jaxmocap.integrate.fitting import BUCKETS, default_pose
 from jaxmocap.integrate.keypoints import keypoint_model, keypoints_cm, params_of
 from smplx_jax import BodyModel, constants, forward_joints
-from smplx_jax.rotations import rotmat_to_rotvec
 
 forward_joints_jit = jax.jit(forward_joints)
 
@@ -129,7 +129,7 @@ def torso_orientation(model: BodyModel, world: np.ndarray) -> np.ndarray:
     reflect = np.sign(np.linalg.det(u @ vt))
     rotation = np.swapaxes((u * np.stack([np.ones_like(reflect), np.ones_like(reflect), reflect], -1)[:, None])
                            @ vt, 1, 2)  # torso ~ rest @ rotation^T
-    rotvecs = np.asarray(rotmat_to_rotvec(rotation.astype(np.float32)))
+    rotvecs = Rotation.from_matrix(rotation).as_rotvec().astype(np.float32)
     seen = np.all(np.isfinite(torso), (1, 2)) & (np.linalg.norm(torso, axis=-1).min(1) > 1e-6)
     return np.where(seen[:, None], rotvecs, np.asarray(default_pose())[0])
 

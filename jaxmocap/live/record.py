@@ -17,6 +17,7 @@ import numpy as np
 
 import smplx_jax
 from jaxmocap.columns import Columns, write_npz
+from jaxmocap.integrate import fitting
 from jaxmocap.integrate.clip import FOOT_JOINTS
 from jaxmocap.integrate.motion_arrays import body_joints
 from jaxmocap.live.causal import Solved
@@ -138,6 +139,13 @@ class Recorder(Recording):
         super().__init__(folder, {"fps": np.asarray(fps), "image_size": np.asarray(image_size),
                                   "model_sha256": np.asarray(model_sha256), "landmark_model": np.asarray(landmarks)}
                          | pinhole, every_s)
+
+    def warm_up(self) -> None:
+        """Compile what a flush's rows run (the joints and reprojection errors, one program a batch size of
+        `fitting.BUCKETS`) before the first frame comes: compiled by the writing thread, they would take the
+        solve's cores for seconds mid-session."""
+        for size in fitting.BUCKETS:
+            self._motion([None] * size, [None] * size)
 
     def _rows(self, frames, names):
         people = sorted({int(n.split(FEET)[0]) for n in names} | {i for solved, _ in frames for i in solved})

@@ -177,10 +177,13 @@ class Session:
             self.recorder.close(CLOSE_SECONDS)
 
     def warm_up(self) -> None:
-        """Compile the solve, the world frame's joints (and the viewer's mesh) before the first frame comes."""
+        """Compile the solve, the world frame's joints, the recording's rows (and the viewer's mesh) before the
+        first frame comes."""
         self.solver.warm_up()
         if self.world is not None:
             self.world.warm_up()
+        if self.recorder is not None:
+            self.recorder.warm_up()
         if self.viewer is not None:
             jax.block_until_ready(_VERTICES(self.model, smplx_jax.SMPLXParams.zeros(self.model.num_betas,
                                                                                       self.model.num_expression)))

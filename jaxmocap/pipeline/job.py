@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 import smplx_jax
 from jaxmocap.detect import Detector
@@ -49,7 +50,6 @@ from jaxmocap.pipeline.stages import (
 from jaxmocap.pipeline.tracks import Bodies, Chunk, Track
 from jaxmocap.pipeline.whole_clip import fitted_track, with_start
 from jaxmocap.result_files import file_sha256
-from smplx_jax.rotations import rotvec_to_rotmat
 
 Observer = Callable[[Chunk, dict[int, Observations]], None]
 SETTINGS_VERSION = 11  # of the stored chunks: bump when what a chunk holds changes
@@ -165,7 +165,7 @@ def _scene_up(config: RunConfig, inputs: Inputs, chunks: list[Chunk], near: np.n
     read = np.concatenate([c.frame_index for c in chunks])
     picked = np.linspace(0, len(read) - 1, SCENE_FRAMES).astype(int)
     images = sample_frames(config.source, read[picked].tolist())
-    turn = np.asarray(rotvec_to_rotmat(np.concatenate([c.scene_from_camera for c in chunks])[picked]), np.float64)
+    turn = Rotation.from_rotvec(np.concatenate([c.scene_from_camera for c in chunks])[picked]).as_matrix()
     if np.all(np.arccos(np.clip((np.trace(turn[0].T @ turn, axis1=1, axis2=2) - 1) / 2, -1, 1)) < AGREE_RAD):
         groups = [(images, turn[0])]
     else:

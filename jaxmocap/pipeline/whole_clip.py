@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Bool, Float
+from scipy.spatial.transform import Rotation
 
 import smplx_jax
 from jaxmocap.compile_cache import disk_jit
@@ -37,7 +38,6 @@ from jaxmocap.integrate.fitting import openpose_keypoint_model
 from jaxmocap.pipeline.observe import HAND_GAP_SECONDS, Observations, fill_hand_gaps
 from jaxmocap.pipeline.stages import initial_bodies
 from jaxmocap.pipeline.tracks import Bodies, Track
-from smplx_jax.rotations import rotvec_to_rotmat
 
 # The landmark models' 2D noise, a share of the extent of what they crop: a few pixels of their 256- or 224-pixel
 # inputs, whose crops span 1.25-2 times the person or the hand; and never below one pixel of the image, whose
@@ -91,7 +91,7 @@ def _ray_rotations(pixels: np.ndarray, lens) -> np.ndarray:
     axis = np.cross([0.0, 0.0, 1.0], ray)
     sine = np.linalg.norm(axis, axis=1, keepdims=True)
     rotvec = np.where(sine > 0, axis / np.maximum(sine, 1e-12), 0.0) * np.arctan2(sine, ray[:, 2:])
-    return np.asarray(rotvec_to_rotmat(rotvec.astype(np.float32)), np.float64)
+    return Rotation.from_rotvec(rotvec).as_matrix()
 
 
 def _unit(vectors, weight):
