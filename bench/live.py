@@ -6,7 +6,10 @@ far the causal result is from the offline ``jaxmocap run`` on each shipped view 
 
 Rows: the live path alone; with the web page watched (a viewer reading the MJPEG stream) and every frame sent as
 a UDP JSON line. Each plays the clip ``LOOPS`` times (``--quick``: twice). Compilation happens before the first
-frame (``live`` warms up), as in a real session.
+frame (``live`` warms up), as in a real session. Then each stage's time per frame (median and 95th percentile, ms;
+`LiveReport.stage_ms`), and beside them the peer in the same run: the official mediapipe 0.10.21 Holistic
+(landmarks only, ``model_complexity=1``) on the same clip frame after frame, in its own venv (``--mediapipe-python``
+or ``$JAXMOCAP_MEDIAPIPE_PYTHON``, as `bench/detect.py`), its frames/s and time per frame.
 """
 
 import argparse
@@ -27,9 +30,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from bench.accuracy import VIEWS  # noqa: E402  (the shipped views)
+from bench.detect import MEDIAPIPE_ENV, PEER, mediapipe_python, run_peer  # noqa: E402
 
 CLIP = VIEWS["cam01"]
 LOOPS = 6
+PEER_FRAMES = 100  # the clip's frames, each once, for the peer's time per frame
 BODY_JOINTS = np.arange(22)  # SMPL-X's pelvis to wrists
 
 
@@ -88,7 +93,9 @@ def session(loops: int, watched: bool) -> dict:
     return dict(read=report.read, solved=report.solved, dropped=report.dropped, seconds=report.seconds,
                 fps=report.fps, latency_median_ms=float(np.median(report.latency_ms)),
                 latency_p95_ms=float(np.percentile(report.latency_ms, 95)), viewer_frames=len(seen),
-                udp_messages=len(messages))
+                udp_messages=len(messages), stages={name: dict(
+                    median_ms=float(np.median(ms)), p95_ms=float(np.percentile(ms, 95)), frames=len(ms))
+                    for name, ms in report.stage_ms.items()})
 
 
 def _receive(receiver: socket.socket, stop: threading.Event, messages: list) -> None:
@@ -121,8 +128,12 @@ def main():
     parser = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("bench/results"))
     parser.add_argument("--quick", action="store_true", help="the clip twice per row")
+    parser.add_argument("--mediapipe-python", default=os.environ.get(MEDIAPIPE_ENV),
+                        help=f"the peer's Python (default: ${MEDIAPIPE_ENV})")
     args = parser.parse_args()
     loops = 2 if args.quick else LOOPS
+    peer = run_peer(mediapipe_python(args.mediapipe_python), PEER, CLIP, PEER_FRAMES)["results"].get("holistic")
+    holistic = None if peer is None else dict(fps=1000 / peer[0], ms_per_frame=peer[0])
     rows = {"as live, 60 fps": session(loops, watched=False),
             "as live, page watched + UDP": session(loops, watched=True)}
     close = {view: agreement(video) for view, video in VIEWS.items()}
@@ -132,12 +143,22 @@ def main():
     for name, r in rows.items():
         print(f"{name:<30}{r['fps']:>9.1f}{r['latency_median_ms']:>10.0f}{r['latency_p95_ms']:>8.0f}{r['solved']:>8}"
               f"{r['dropped']:>8}{r['viewer_frames']:>8}{r['udp_messages']:>6}")
+    if holistic is not None:
+        print(f"{'mediapipe Holistic (landmarks)':<30}{holistic['fps']:>9.1f}{holistic['ms_per_frame']:>10.0f}")
+        for name, r in rows.items():
+            print(f"{name}: {r['fps'] / holistic['fps']:.2f}x Holistic's frames/s, median latency "
+                  f"{r['latency_median_ms'] / holistic['ms_per_frame']:.2f}x its time per frame")
+    print(f"\n{'stage (ms a frame)':<30}" + "".join(f"{name[:20]:>22}" for name in rows))
+    for stage in sorted({s for r in rows.values() for s in r["stages"]}):
+        cells = [r["stages"].get(stage) for r in rows.values()]
+        print(f"{stage:<30}" + "".join(
+            f"{'-':>22}" if c is None else f"{c['median_ms']:>10.1f} (p95 {c['p95_ms']:>5.1f})" for c in cells))
     for view, c in close.items():
         print(f"{view}: live against the offline run, every frame: PA-MPJPE {c['pa_mpjpe_mm']:.1f} mm over "
               f"{c['frames']} frames (body joints)")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "live.json").write_text(json.dumps(dict(benchmark="live", cpus=os.cpu_count(), loops=loops,
-                                                        rows=rows, agreement=close), indent=2))
+                                                        rows=rows, holistic=holistic, agreement=close), indent=2))
     print(f"wrote {args.out / 'live.json'}")
 
 

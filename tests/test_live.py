@@ -263,6 +263,9 @@ def played(tmp_path_factory):
 def test_every_frame_is_solved_when_played_as_fast_as_solved(played):
     report, motion, _ = played
     assert report.stopped == "end of stream" and report.read == report.solved == 200 and report.dropped == 0
+    assert {stage: len(ms) for stage, ms in report.stage_ms.items()} == dict.fromkeys(
+        ("detect", "fit", "world", "output"), 200)  # each stage timed on each frame (no page: nothing drawn)
+    assert all(np.all(ms > 0) for ms in report.stage_ms.values())
     assert motion["valid"].sum() >= 196 and np.array_equal(motion["frame_index"], np.arange(200))
     assert np.median(motion["reprojection_error_px"][motion["valid"]]) < 15.0
     assert_kept_for_the_next_process(causal.step)

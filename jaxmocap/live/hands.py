@@ -226,12 +226,14 @@ class HandSession(Session):
 
     def _solve(self, frame: Frame, hands: list[Hand]) -> dict[int, tuple[Hand, HandFit]]:
         now = frame.arrived if self.source.live else frame.index / self.source.fps
-        fits = self.solver(hands, now)
-        if self.sender is not None:
-            entries = [hand_entry(h, fits[h.hand_id]) for h in hands if fits[h.hand_id].valid]
-            self.sender.send(frame_message(frame.index, now, [], hands=entries))
-        if self.recorder is not None:
-            self.recorder.add(frame.index, now, hands, fits)
+        with self._stage("fit"):
+            fits = self.solver(hands, now)
+        with self._stage("output"):
+            if self.sender is not None:
+                entries = [hand_entry(h, fits[h.hand_id]) for h in hands if fits[h.hand_id].valid]
+                self.sender.send(frame_message(frame.index, now, [], hands=entries))
+            if self.recorder is not None:
+                self.recorder.add(frame.index, now, hands, fits)
         return {h.hand_id: (h, fits[h.hand_id]) for h in hands}
 
     def _posed(self, solved: dict[int, tuple[Hand, HandFit]]) -> list[Posed]:

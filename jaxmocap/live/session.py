@@ -7,6 +7,7 @@ viewer a fourth renders the overlay for the web page (`Viewer`). A stage that fa
 could not take (counted); a file played as fast as it can be (no ``realtime``) drops nothing.
 """
 
+import contextlib
 import dataclasses
 import functools
 import signal
@@ -91,7 +92,8 @@ class LiveConfig:
 class LiveReport:
     """What a live session did: frames read from the source, solved and dropped; seconds from the first frame
     read to the last result; each solved frame's latency (ms, from its arrival to its parameters out); why it
-    stopped; files written."""
+    stopped; files written; each stage's time on each frame it ran on (ms, by stage: ``detect``, ``fit``,
+    ``world``, ``output`` (the UDP message and the recording), ``draw`` (the page's overlay and its JPEG))."""
 
     read: int
     solved: int
@@ -100,6 +102,7 @@ class LiveReport:
     latency_ms: np.ndarray
     stopped: str
     written: list[Path]
+    stage_ms: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def fps(self) -> float:
@@ -137,6 +140,7 @@ class Session:
         self.detected, self.shown = Mailbox(), Mailbox()
         self.errors: list[BaseException] = []
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, self.noun: 0}
+        self.stage_ms: dict[str, list[float]] = {}
         self.recorder = self.viewer = self.world = None
         try:
             self._setup(file_sha256(model_path))
@@ -204,10 +208,19 @@ class Session:
         thread.start()
         return thread
 
+    @contextlib.contextmanager
+    def _stage(self, name: str):
+        """Times the block as one frame's ``name`` stage (`LiveReport.stage_ms`)."""
+        start = time.perf_counter()
+        yield
+        self.stage_ms.setdefault(name, []).append(1000 * (time.perf_counter() - start))
+
     def _detect(self) -> None:
         while True:
             frame = self.source.frames.get()
-            self.detected.put((frame, self._observe(frame.image)), wait=self.source.lossless)
+            with self._stage("detect"):
+                people = self._observe(frame.image)
+            self.detected.put((frame, people), wait=self.source.lossless)
 
     def _observe(self, image: np.ndarray) -> dict[int, Observations]:
         """What the solve needs of one frame: each person's observations by identity (with ``--max-people 1``
@@ -227,26 +240,30 @@ class Session:
         scale = min(1.0, self.config.view_height / self.source.size[1])
         while True:
             frame, solved = self.shown.get()
-            image = people_over_frame(frame.image, self._posed(solved), faces, scale, *self.lens)
-            stats = self.stats
-            cv2.putText(image, f"{stats['fps']:.1f} frames/s  {stats['latency_ms']:.0f} ms", (10, 24),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
-            ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 80])
+            with self._stage("draw"):
+                image = people_over_frame(frame.image, self._posed(solved), faces, scale, *self.lens)
+                stats = self.stats
+                cv2.putText(image, f"{stats['fps']:.1f} frames/s  {stats['latency_ms']:.0f} ms", (10, 24),
+                            cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
+                ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 80])
             if ok:
                 self.viewer.publish(jpeg.tobytes(), stats)
 
     def _solve(self, frame: Frame, people: dict[int, Observations]) -> dict[int, Solved]:
         now = frame.arrived if self.source.live else frame.index / self.source.fps
-        solved = self.solver(people, now)
-        world = self.world.keys(now, solved, frame.image)
-        if self.sender is not None:
-            camera_from_world = self.world.camera_from_world  # (set after the floor)
-            floor = None if camera_from_world is None else self.world.floor.array
-            self.sender.send(frame_message(frame.index, now, [
-                person_message(i, s.params, s.camera_scale, s.camera_trans, people[i].keypoints[0], world.get(i))
-                for i, s in solved.items() if s.valid], floor=floor, camera_from_world=camera_from_world))
-        if self.recorder is not None:
-            self.recorder.add(frame.index, now, solved, {i: o.keypoints[0] for i, o in people.items()})
+        with self._stage("fit"):
+            solved = self.solver(people, now)
+        with self._stage("world"):
+            world = self.world.keys(now, solved, frame.image)
+        with self._stage("output"):
+            if self.sender is not None:
+                camera_from_world = self.world.camera_from_world  # (set after the floor)
+                floor = None if camera_from_world is None else self.world.floor.array
+                self.sender.send(frame_message(frame.index, now, [
+                    person_message(i, s.params, s.camera_scale, s.camera_trans, people[i].keypoints[0], world.get(i))
+                    for i, s in solved.items() if s.valid], floor=floor, camera_from_world=camera_from_world))
+            if self.recorder is not None:
+                self.recorder.add(frame.index, now, solved, {i: o.keypoints[0] for i, o in people.items()})
         return solved
 
     def run(self) -> LiveReport:
@@ -304,7 +321,7 @@ class Session:
     def _finish(self, latencies: list[float], stopped: str, seconds: float) -> LiveReport:
         written = [] if self.recorder is None else self.recorder.written
         return LiveReport(self.source.read, len(latencies), self._dropped(), seconds, np.asarray(latencies), stopped,
-                          written)
+                          written, {name: np.asarray(ms) for name, ms in self.stage_ms.items()})
 
 
 _sheltered = functools.partial(handling, signal.SIG_IGN, signal.SIGINT, signal.SIGTERM)  # Ctrl-C and SIGTERM ignored
