@@ -94,11 +94,10 @@ class LiveWorld:
                 for k, (i, s) in enumerate(valid.items())}
 
     def warm_up(self) -> None:
-        """Compile what one frame's keys run (the heels' and toes' joints, the world pose), so that the first
-        person's frame does not wait."""
+        """Compile what one frame's keys run (the heels' and toes' joints), so that the first person's frame does
+        not wait."""
         body_joints(self.model, jax.tree.map(lambda a: np.asarray(a)[None], smplx_jax.SMPLXParams.zeros(
             self.model.num_betas, self.model.num_expression)))
-        world_pose(np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32), np.zeros((1, 3)), np.eye(4)[None])
 
     def settle(self, timeout: float) -> None:
         """Wait for the floor being found (at most ``timeout`` seconds)."""
