@@ -139,7 +139,7 @@ class ClipLevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         decrement = 0.5 * _dot(gradient, inverse(gradient))
         converged = (decrement <= self.tolerance) & (state.damping <= 1.0)
         damping, growth = nielsen_damping(state.damping, state.growth, accept, ratio)
-        new = _State(jnp.where(accept, cost, state.cost), jnp.minimum(damping, MAX_DAMPING), growth, converged)
+        new = _State(jnp.where(accept, cost, state.cost), damping, growth, converged)
         return jax.tree.map(lambda a, b: jnp.where(accept, a, b), trial, y), new, None
 
     def terminate(self, fn, y, args, options, state, tags):

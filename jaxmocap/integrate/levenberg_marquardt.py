@@ -72,8 +72,9 @@ MAX_GROWTH = 1024.0  # the most Nielsen's rule multiplies the damping by after a
 def nielsen_damping(damping, growth, accept, ratio):
     """Nielsen's rule: after a step whose actual decrease is ``ratio`` times the predicted one, the damping and
     its growth factor. Taken: the damping times ``max(1/3, 1 - (2 ratio - 1)^3)``, the factor back to 2; refused:
-    the damping times the factor, which doubles (to `MAX_GROWTH`)."""
-    return (jnp.where(accept, damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3), damping * growth),
+    the damping times the factor, which doubles (to `MAX_GROWTH`). The damping is held at `MAX_DAMPING`."""
+    return (jnp.minimum(jnp.where(accept, damping * jnp.maximum(1 / 3, 1 - (2 * ratio - 1) ** 3), damping * growth),
+                        MAX_DAMPING),
             jnp.where(accept, 2.0, jnp.minimum(2.0 * growth, MAX_GROWTH)))
 
 
@@ -375,7 +376,7 @@ class LevenbergMarquardt(optx.AbstractLeastSquaresSolver):
         else:  # the pipeline's few CG steps hold no limit's stiffness
             last_step, last_gradient, stiff = state.last_step, state.last_gradient, state.stiff
         restart = (damping >= MAX_DAMPING) & ~state.restarted
-        new = _State(jnp.where(accept, cost, state.cost), jnp.where(restart, 1.0, jnp.minimum(damping, MAX_DAMPING)),
+        new = _State(jnp.where(accept, cost, state.cost), jnp.where(restart, 1.0, damping),
                      jnp.where(restart, 2.0, growth), converged,
                      jnp.where(restart, 0.0, secant), last_step, last_gradient, accept, stiff,
                      state.restarted | restart, state.steps + 1)
