@@ -14,6 +14,7 @@ import signal
 import sys
 import threading
 import time
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -140,7 +141,7 @@ class Session:
         self.detected, self.shown = Mailbox(), Mailbox()
         self.errors: list[BaseException] = []
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, self.noun: 0}
-        self.stage_ms: dict[str, list[float]] = {}
+        self.stage_ms: dict[str, array] = {}  # doubles: 8 bytes a frame and stage however long the session runs
         self.recorder = self.viewer = self.world = None
         try:
             self._setup(file_sha256(model_path))
@@ -213,7 +214,7 @@ class Session:
         """Times the block as one frame's ``name`` stage (`LiveReport.stage_ms`)."""
         start = time.perf_counter()
         yield
-        self.stage_ms.setdefault(name, []).append(1000 * (time.perf_counter() - start))
+        self.stage_ms.setdefault(name, array("d")).append(1000 * (time.perf_counter() - start))
 
     def _detect(self) -> None:
         while True:
@@ -269,7 +270,7 @@ class Session:
     def run(self) -> LiveReport:
         threads = [self._thread(self._detect)] + ([self._thread(self._render)] if self.viewer else [])
         self.source.start()
-        latencies, stopped, first, last, shown_at = [], "end of stream", None, None, 0.0
+        latencies, stopped, first, last, shown_at = array("d"), "end of stream", None, None, 0.0
         try:
             while self.config.max_frames is None or len(latencies) < self.config.max_frames:
                 try:
@@ -309,7 +310,7 @@ class Session:
     def _dropped(self) -> int:
         return self.source.frames.dropped + self.detected.dropped
 
-    def _update_stats(self, latencies: list[float], count: int, seconds: float) -> None:
+    def _update_stats(self, latencies: array, count: int, seconds: float) -> None:
         recent = latencies[-60:]
         self.stats = {"fps": len(latencies) / max(seconds, 1e-9), "latency_ms": float(np.median(recent)),
                       "dropped": self._dropped(), "solved": len(latencies), self.noun: count}
@@ -318,7 +319,7 @@ class Session:
             print(f"\rlive: {s['fps']:.1f} frames/s, latency {s['latency_ms']:.0f} ms, {s['dropped']} dropped, "
                   f"{count} {self.noun}", end="", file=sys.stderr, flush=True)
 
-    def _finish(self, latencies: list[float], stopped: str, seconds: float) -> LiveReport:
+    def _finish(self, latencies: array, stopped: str, seconds: float) -> LiveReport:
         written = [] if self.recorder is None else self.recorder.written
         return LiveReport(self.source.read, len(latencies), self._dropped(), seconds, np.asarray(latencies), stopped,
                           written, {name: np.asarray(ms) for name, ms in self.stage_ms.items()})
