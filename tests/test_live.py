@@ -78,18 +78,40 @@ def test_mailbox_waits_when_lossless():
     assert taken == list(range(20)) and box.dropped == 0
 
 
-def test_a_file_played_as_live_drops_what_a_slow_reader_misses():
-    source = LiveSource(CLIP, realtime=True).start()
+class _Counted:
+    """A capture whose frames converted to images (`retrieve`, `read`) are counted."""
+
+    def __init__(self, capture):
+        self.capture, self.converted = capture, 0
+
+    def __getattr__(self, name):
+        return getattr(self.capture, name)
+
+    def retrieve(self):
+        self.converted += 1
+        return self.capture.retrieve()
+
+    def read(self):
+        self.converted += 1
+        return self.capture.read()
+
+
+def test_a_file_played_as_live_drops_what_a_slow_reader_misses_and_converts_only_what_it_takes():
+    source = LiveSource(CLIP, realtime=True)
+    source.capture = counted = _Counted(source.capture)
+    source.start()
     taken = []
     try:
         while True:
             frame = source.frames.get(timeout=5)
+            assert frame.image.shape == (1920, 1080, 3)
             taken.append(frame.index)
             time.sleep(0.05)  # three frames' time at 60 fps
     except Closed:
         pass
-    assert source.read == 100 and len(taken) + source.frames.dropped == 100
+    assert source.read == 100 and len(taken) + source.dropped == 100
     assert 20 <= len(taken) <= 45 and taken == sorted(taken) and taken[-1] >= 97
+    assert counted.converted == len(taken) - 1  # the first frame was read on opening
 
 
 def test_udp_messages_parse_back_into_params():
@@ -214,6 +236,35 @@ def test_the_page_serves_a_bounded_number_of_streams():
         viewer.close()
 
 
+def test_a_frame_is_wanted_only_while_a_viewer_waits_for_one():
+    """The session draws only when `Viewer.wanted`: not before anyone watches, while a viewer waits for its next
+    frame, and no longer once it has gone (found at the first frames that fail to reach it)."""
+    viewer = Viewer("127.0.0.1", 0, timeout=1.0)
+    host = f"127.0.0.1:{viewer.port}"
+
+    def until(condition, seconds=10.0, publish=False):
+        deadline = time.monotonic() + seconds
+        while not condition():
+            assert time.monotonic() < deadline
+            if publish:
+                viewer.publish(b"\xff\xd8frame\xff\xd9" * 20_000)
+            time.sleep(0.02)
+
+    try:
+        assert not viewer.wanted()
+        watching = socket.create_connection(("127.0.0.1", viewer.port))
+        watching.sendall(f"GET /stream.mjpg HTTP/1.1\r\nHost: {host}\r\n\r\n".encode())
+        assert watching.recv(100).startswith(b"HTTP/1.0 200")
+        until(viewer.wanted)
+        watching.close()
+        until(lambda: not viewer.wanted(), publish=True)
+        viewer.publish(b"\xff\xd8frame\xff\xd9")
+        time.sleep(1.5)  # the stream's wait times out and is not taken again
+        assert not viewer.wanted()
+    finally:
+        viewer.close()
+
+
 def test_a_viewer_that_stops_reading_never_stalls_publishing():
     viewer = Viewer("127.0.0.1", 0, timeout=2.0)
     stalled = socket.create_connection(("127.0.0.1", viewer.port))
@@ -235,8 +286,8 @@ def test_a_viewer_that_stops_reading_never_stalls_publishing():
 # -- the causal path on the clip ------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def played(tmp_path_factory):
-    """The clip played twice as fast as it is solved (every frame), recorded and streamed over UDP: long enough for
-    the floor of its first second to be found while it plays."""
+    """The clip played twice as fast as it is solved (every frame), recorded and streamed over UDP, its page served
+    (nobody watching): long enough for the floor of its first second to be found while it plays."""
     out = tmp_path_factory.mktemp("live")
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
@@ -252,7 +303,7 @@ def played(tmp_path_factory):
 
     thread = threading.Thread(target=receive)
     thread.start()
-    report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), progress=False, loops=2))
+    report = live(LiveConfig(CLIP, record=out, udp=receiver.getsockname(), serve=0, progress=False, loops=2))
     time.sleep(0.3)
     done.set()
     thread.join()
@@ -264,7 +315,7 @@ def test_every_frame_is_solved_when_played_as_fast_as_solved(played):
     report, motion, _ = played
     assert report.stopped == "end of stream" and report.read == report.solved == 200 and report.dropped == 0
     assert {stage: len(ms) for stage, ms in report.stage_ms.items()} == dict.fromkeys(
-        ("detect", "fit", "world", "output"), 200)  # each stage timed on each frame (no page: nothing drawn)
+        ("detect", "fit", "world", "output"), 200)  # each stage timed on each frame (nobody watching: nothing drawn)
     assert all(np.all(ms > 0) for ms in report.stage_ms.values())
     assert motion["valid"].sum() >= 196 and np.array_equal(motion["frame_index"], np.arange(200))
     assert np.median(motion["reprojection_error_px"][motion["valid"]]) < 15.0

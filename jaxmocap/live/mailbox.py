@@ -14,8 +14,15 @@ class Mailbox:
 
     def __init__(self):
         self._changed = threading.Condition()
-        self._item, self._full, self._closed = None, False, False
+        self._item, self._full, self._closed, self._waiting = None, False, False, 0
         self.dropped = 0
+
+    def asked(self, timeout: float) -> bool:
+        """Whether someone waits in `get` for an item, waiting at most ``timeout`` seconds for one to (False at
+        once when closed): what a producer that makes an item only when it is taken waits on."""
+        with self._changed:
+            self._changed.wait_for(lambda: (self._waiting > 0 and not self._full) or self._closed, max(timeout, 0.0))
+            return self._waiting > 0 and not self._full and not self._closed
 
     def put(self, item, wait: bool = False) -> None:
         with self._changed:
@@ -30,8 +37,13 @@ class Mailbox:
     def get(self, timeout: float | None = None):
         """The item, waiting at most ``timeout`` seconds (then `TimeoutError`)."""
         with self._changed:
-            if not self._changed.wait_for(lambda: self._full or self._closed, timeout):
-                raise TimeoutError("no item")
+            self._waiting += 1
+            self._changed.notify_all()
+            try:
+                if not self._changed.wait_for(lambda: self._full or self._closed, timeout):
+                    raise TimeoutError("no item")
+            finally:
+                self._waiting -= 1
             if not self._full:
                 raise Closed
             item, self._item, self._full = self._item, None, False

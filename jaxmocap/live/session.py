@@ -241,6 +241,8 @@ class Session:
         scale = min(1.0, self.config.view_height / self.source.size[1])
         while True:
             frame, solved = self.shown.get()
+            if not self.viewer.wanted():  # nobody watching, or every viewer still busy with the last frame
+                continue
             with self._stage("draw"):
                 image = people_over_frame(frame.image, self._posed(solved), faces, scale, *self.lens)
                 stats = self.stats
@@ -308,12 +310,14 @@ class Session:
             return self._finish(latencies, stopped, 0.0 if first is None else last - first)
 
     def _dropped(self) -> int:
-        return self.source.frames.dropped + self.detected.dropped
+        return self.source.dropped + self.detected.dropped
 
     def _update_stats(self, latencies: array, count: int, seconds: float) -> None:
         recent = latencies[-60:]
         self.stats = {"fps": len(latencies) / max(seconds, 1e-9), "latency_ms": float(np.median(recent)),
                       "dropped": self._dropped(), "solved": len(latencies), self.noun: count}
+        if self.viewer is not None:  # the page's rates, also while no frame is drawn
+            self.viewer.stats = self.stats
         if self.config.progress:
             s = self.stats
             print(f"\rlive: {s['fps']:.1f} frames/s, latency {s['latency_ms']:.0f} ms, {s['dropped']} dropped, "

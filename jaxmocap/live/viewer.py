@@ -2,7 +2,9 @@
 
 It serves three paths only, ``/`` (the page), ``/stream.mjpg`` and ``/stats.json``; anything else is a 404, and
 no path reaches the file system. Each viewer has its own thread: `publish` only swaps the newest frame in, so a
-slow viewer misses frames and a vanished one times out; capture never waits for either.
+slow viewer misses frames and a vanished one times out; capture never waits for either. `wanted` says whether a
+viewer is waiting for a frame newer than the last one published: the session draws only then, so a page served
+but not watched costs nothing, and a watched one is drawn no faster than its viewers ask for frames.
 
 Who may watch: a request's ``Host`` must name the address the page listens on (on a loopback address: 127.0.0.1,
 localhost or [::1], with its port), so that a web page elsewhere cannot rebind its own name to this machine and
@@ -57,7 +59,7 @@ class Viewer:
         self.token = None if is_loopback(host) else secrets.token_urlsafe(16)
         self._streams = threading.BoundedSemaphore(max_viewers)
         self._changed = threading.Condition()
-        self._jpeg, self._count, self._closed = None, 0, False
+        self._jpeg, self._count, self._closed, self._waiting = None, 0, False, 0
         self.stats = {"fps": 0.0, "latency_ms": 0.0, "dropped": 0, "solved": 0, "people": 0}
 
         class Handler(_Handler):
@@ -106,11 +108,20 @@ class Viewer:
             self.stats = stats or self.stats
             self._changed.notify_all()
 
-    def frame_after(self, count: int, timeout: float) -> tuple[int, bytes | None]:
-        """The first frame published after the ``count``-th (waiting at most ``timeout`` s): ``(its count,
-        JPEG)``; ``None`` when closed or timed out."""
+    def wanted(self) -> bool:
+        """Whether a viewer is waiting for a frame newer than the newest published."""
         with self._changed:
-            self._changed.wait_for(lambda: self._count > count or self._closed, timeout)
+            return self._waiting > 0
+
+    def frame_after(self, count: int, timeout: float) -> tuple[int, bytes | None]:
+        """The first frame published after the ``count``-th (waiting at most ``timeout`` s, `wanted` meanwhile):
+        ``(its count, JPEG)``; ``None`` when closed or timed out."""
+        with self._changed:
+            self._waiting += 1
+            try:
+                self._changed.wait_for(lambda: self._count > count or self._closed, timeout)
+            finally:
+                self._waiting -= 1
             return self._count, None if self._closed or self._count <= count else self._jpeg
 
     @property
