@@ -1,6 +1,7 @@
 """Live capture (`jaxmocap live`): sustained frames/s, latency from a frame's arrival to its parameters out (median
-and 95th percentile) and frames dropped, on the bundled clip played as if live at its own 60 frames/s; and how
-far the causal result is from the offline ``jaxmocap run`` on each shipped view (PA-MPJPE of the body joints).
+and 95th percentile) and frames dropped, on the bundled clip played as if live at its own 60 frames/s; each
+thread's CPU time per frame solved (`ThreadCpu`: where the cores go); and how far the causal result is from the
+offline ``jaxmocap run`` on each shipped view (PA-MPJPE of the body joints).
 
     python bench/live.py [--out bench/results] [--quick]      (or: jaxmocap bench --only live)
 
@@ -68,15 +69,61 @@ def _watch(url: str, stop: threading.Event, seen: list) -> None:
                 seen.append(1)
 
 
+class ThreadCpu:
+    """Each thread's CPU time from `start` to `stop` (Linux: ``/proc/self/task``, sampled every ``period`` s, so a
+    thread that ends keeps its last sample), summed by name: Python's threads by their names (``jaxmocap-detect``,
+    ``MainThread``: the solve), native ones by the kernel's (``tf_XLAEigen``: XLA's, ``av:h264:*``: FFmpeg's decoding,
+    ``python``: unnamed ones, LiteRT's workers among them). Empty where there is no ``/proc``."""
+
+    def __init__(self, period: float = 0.2):
+        self.period, self.names, self.first, self.last = period, {}, {}, {}
+        self._stop, self._thread = threading.Event(), threading.Thread(target=self._sample, daemon=True)
+
+    @staticmethod
+    def _now() -> dict[int, tuple[str, float]]:
+        tick, out = os.sysconf("SC_CLK_TCK"), {}
+        for tid in os.listdir("/proc/self/task") if os.path.isdir("/proc/self/task") else ():
+            try:
+                comm = Path(f"/proc/self/task/{tid}/comm").read_text().strip()
+                fields = Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:  # ended meanwhile
+                continue
+            out[int(tid)] = (comm, (int(fields[11]) + int(fields[12])) / tick)  # utime + stime
+        return out
+
+    def _sample(self) -> None:
+        while True:
+            self.names.update({t.native_id: t.name for t in threading.enumerate()})
+            self.last.update(self._now())
+            if self._stop.wait(self.period):
+                return
+
+    def start(self) -> None:
+        self.first = self._now()
+        self._thread.start()
+
+    def stop(self) -> dict[str, float]:
+        """CPU seconds by thread name since `start`."""
+        self._stop.set()
+        self._thread.join()
+        self.last.update(self._now())
+        total: dict[str, float] = {}
+        for tid, (comm, seconds) in self.last.items():
+            name = self.names.get(tid, comm)
+            total[name] = total.get(name, 0.0) + seconds - self.first.get(tid, (comm, 0.0))[1]
+        return {name: seconds for name, seconds in sorted(total.items(), key=lambda kv: -kv[1]) if seconds > 0}
+
+
 def session(loops: int, watched: bool) -> dict:
     from jaxmocap.live import LiveConfig, live
 
     receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     receiver.bind(("127.0.0.1", 0))
     receiver.settimeout(0.5)
-    stop, seen, messages, threads = threading.Event(), [], [], []
+    stop, seen, messages, threads, cpu = threading.Event(), [], [], [], ThreadCpu()
 
     def started(url):
+        cpu.start()  # capture starts: compiling is over
         if watched:
             threads.append(threading.Thread(target=_watch, args=(url, stop, seen), daemon=True))
             threads.append(threading.Thread(target=_receive, args=(receiver, stop, messages), daemon=True))
@@ -86,6 +133,7 @@ def session(loops: int, watched: bool) -> dict:
     config = LiveConfig(CLIP, realtime=True, loops=loops, progress=False, serve=0 if watched else None,
                         udp=receiver.getsockname() if watched else None)
     report = live(config, started)
+    thread_cpu = cpu.stop()
     stop.set()
     for t in threads:
         t.join(timeout=5)
@@ -93,7 +141,7 @@ def session(loops: int, watched: bool) -> dict:
     return dict(read=report.read, solved=report.solved, dropped=report.dropped, seconds=report.seconds,
                 fps=report.fps, latency_median_ms=float(np.median(report.latency_ms)),
                 latency_p95_ms=float(np.percentile(report.latency_ms, 95)), viewer_frames=len(seen),
-                udp_messages=len(messages), stages={name: dict(
+                udp_messages=len(messages), thread_cpu_s=thread_cpu, stages={name: dict(
                     median_ms=float(np.median(ms)), p95_ms=float(np.percentile(ms, 95)), frames=len(ms))
                     for name, ms in report.stage_ms.items()})
 
@@ -153,6 +201,14 @@ def main():
         cells = [r["stages"].get(stage) for r in rows.values()]
         print(f"{stage:<30}" + "".join(
             f"{'-':>22}" if c is None else f"{c['median_ms']:>10.1f} (p95 {c['p95_ms']:>5.1f})" for c in cells))
+    print(f"\n{'thread (CPU ms a frame solved)':<30}" + "".join(f"{name[:20]:>22}" for name in rows))
+    for thread in sorted({t for r in rows.values() for t in r["thread_cpu_s"]},
+                         key=lambda t: -max(r["thread_cpu_s"].get(t, 0.0) for r in rows.values())):
+        cells = [1000 * r["thread_cpu_s"].get(thread, 0.0) / max(r["solved"], 1) for r in rows.values()]
+        if max(cells) >= 0.5:
+            print(f"{thread[:30]:<30}" + "".join(f"{c:>22.1f}" for c in cells))
+    print(f"{'cores busy (of ' + str(os.cpu_count()) + ')':<30}" + "".join(
+        f"{sum(r['thread_cpu_s'].values()) / r['seconds']:>22.2f}" for r in rows.values()))
     for view, c in close.items():
         print(f"{view}: live against the offline run, every frame: PA-MPJPE {c['pa_mpjpe_mm']:.1f} mm over "
               f"{c['frames']} frames (body joints)")
