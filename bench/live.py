@@ -21,6 +21,7 @@ import socket
 import sys
 import tempfile
 import threading
+import time
 import urllib.parse
 import urllib.request
 from pathlib import Path
@@ -63,6 +64,8 @@ def _watch(url: str, stop: threading.Event, seen: list) -> None:
     with urllib.request.urlopen(urllib.parse.urljoin(url, "stream.mjpg"), timeout=10) as stream:
         while not stop.is_set():
             line = stream.readline()
+            if not line:  # the session has ended
+                return
             if line.startswith(b"Content-Length:"):
                 stream.readline()
                 stream.read(int(line.split(b":")[1]))
@@ -99,14 +102,15 @@ class ThreadCpu:
                 return
 
     def start(self) -> None:
-        self.first = self._now()
+        self.first, self.began = self._now(), time.perf_counter()
         self._thread.start()
 
     def stop(self) -> dict[str, float]:
-        """CPU seconds by thread name since `start`."""
+        """CPU seconds by thread name since `start` (``seconds``: the time since)."""
         self._stop.set()
         self._thread.join()
         self.last.update(self._now())
+        self.seconds = time.perf_counter() - self.began
         total: dict[str, float] = {}
         for tid, (comm, seconds) in self.last.items():
             name = self.names.get(tid, comm)
@@ -141,7 +145,8 @@ def session(loops: int, watched: bool) -> dict:
     return dict(read=report.read, solved=report.solved, dropped=report.dropped, seconds=report.seconds,
                 fps=report.fps, latency_median_ms=float(np.median(report.latency_ms)),
                 latency_p95_ms=float(np.percentile(report.latency_ms, 95)), viewer_frames=len(seen),
-                udp_messages=len(messages), thread_cpu_s=thread_cpu, stages={name: dict(
+                udp_messages=len(messages), thread_cpu_s=thread_cpu, thread_cpu_window_s=cpu.seconds,
+                stages={name: dict(
                     median_ms=float(np.median(ms)), p95_ms=float(np.percentile(ms, 95)), frames=len(ms))
                     for name, ms in report.stage_ms.items()})
 
@@ -208,7 +213,7 @@ def main():
         if max(cells) >= 0.5:
             print(f"{thread[:30]:<30}" + "".join(f"{c:>22.1f}" for c in cells))
     print(f"{'cores busy (of ' + str(os.cpu_count()) + ')':<30}" + "".join(
-        f"{sum(r['thread_cpu_s'].values()) / r['seconds']:>22.2f}" for r in rows.values()))
+        f"{sum(r['thread_cpu_s'].values()) / r['thread_cpu_window_s']:>22.2f}" for r in rows.values()))
     for view, c in close.items():
         print(f"{view}: live against the offline run, every frame: PA-MPJPE {c['pa_mpjpe_mm']:.1f} mm over "
               f"{c['frames']} frames (body joints)")
