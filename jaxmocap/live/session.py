@@ -250,7 +250,7 @@ class Session:
                             cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
                 ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 80])
             if ok:
-                self.viewer.publish(jpeg.tobytes(), stats)
+                self.viewer.publish(jpeg.tobytes())  # (its rates: `_update_stats`)
 
     def _solve(self, frame: Frame, people: dict[int, Observations]) -> dict[int, Solved]:
         now = frame.arrived if self.source.live else frame.index / self.source.fps

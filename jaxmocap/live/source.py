@@ -48,14 +48,14 @@ class LiveSource:
         self.lossless = not (self.live or realtime)
         self.loops = loops
         self.frames = Mailbox()
-        self.read, self._unconverted = 0, 0
+        self.read, self._put = 0, 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="jaxmocap-source", daemon=True)
 
     @property
     def dropped(self) -> int:
-        """Frames read but not taken: replaced in `frames` before they were, or never asked for."""
-        return self.frames.dropped + self._unconverted
+        """Frames read but not taken: never put into `frames` (not asked for), or replaced there before taken."""
+        return self.read - self._put + self.frames.dropped
 
     def start(self) -> "LiveSource":
         self._thread.start()
@@ -90,29 +90,28 @@ class LiveSource:
                     ok, image = self.capture.read()
                     ok = ok and image is not None
                 if not ok:  # the end: again from the start, unless the file cannot be played again
-                    played, self._unconverted, grabbed = played + 1, self._unconverted + (grabbed is not None), None
+                    played, grabbed = played + 1, None
                     if self.live or (self.loops and played >= self.loops) or this_play == 0:
                         return
                     self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
                     this_play = 0
                     continue
+                index, self.read, this_play = self.read, self.read + 1, this_play + 1  # (read before put: `dropped`)
                 if timed:
-                    self._unconverted += grabbed is not None
-                    grabbed = (self.read, image, due)
+                    grabbed = (index, image, due)
                 else:
-                    self.frames.put(Frame(self.read, image, time.perf_counter()), wait=self.lossless)
-                self.read, this_play = self.read + 1, this_play + 1
+                    self._hand_over((index, image, time.perf_counter()))
         finally:
             self.capture.release()
             self.frames.close()
 
     def _hand_over(self, grabbed: tuple[int, np.ndarray | None, float]) -> None:
-        """Puts the grabbed frame (its number, its image where it has one, when it was due), its image converted
-        now (none put where the file gives none for it)."""
-        index, image, due = grabbed
+        """Puts the frame read (its number, its image, or None where it was grabbed and not yet converted, when it
+        came) into `frames`, converting it now (none put where the file gives none for it)."""
+        index, image, arrived = grabbed
         if image is None:
             ok, image = self.capture.retrieve()
             if not ok or image is None:
-                self._unconverted += 1
                 return
-        self.frames.put(Frame(index, image, due))
+        self.frames.put(Frame(index, image, arrived), wait=self.lossless)
+        self._put += 1
