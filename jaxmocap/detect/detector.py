@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -14,7 +15,7 @@ from .assignment import gated_pairs
 from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models, landmark_model_path
-from .pose import PoseEstimator, PoseResult, landmark_box, overlap, rect_extent, rect_iou
+from .pose import PoseEstimator, PoseResult, Silhouette, landmark_box, overlap, rect_extent
 from .roi import Rect, normalize_radians
 from .ssd import Detection, in_image, square_tiles
 from .track_state import result_of, results_state
@@ -28,6 +29,19 @@ CONFIRM_FRAMES = 2  # a person found beside others is reported once tracked in t
 # starts a burst of searches, as a lost track does (`Detector`)
 DOUBTFUL_PRESENCE = 0.1
 UPSIDE_DOWN = 0.75 * math.pi  # a detection turned more than this (radians) is tried upright too
+# BlazePose's landmarks with left and right exchanged: nose, eyes, ears, mouth, then the pairs from the shoulders down
+SIDES_EXCHANGED = np.array([0, 4, 5, 6, 1, 2, 3, 8, 7, 10, 9, *np.arange(11, 33).reshape(-1, 2)[:, ::-1].ravel()])
+# two skeletons are one person's when their landmarks lie this close on average (torso lengths): a limb's radius
+# (about a sixth of the torso) and the landmark model's noise between two crops of one person; two people whose
+# skeletons came this close would stand inside each other
+SAME_SKELETON = 0.25
+# someone found beside people hidden from view (`Detector._detect_people`) is taken when the landmark model sees at
+# least this many of their 33 landmarks (visibility at least 0.5): a third of a body, as of anyone half hidden;
+# a skeleton laid over a thing in the background is mostly guessed
+MIN_SEEN_BEHIND = 11
+# a track lost in a frame is its person found again in that frame by the person detector when their landmarks lie
+# this close on average (torso lengths: about 25 cm, what a body moves in a frame at 15 frames/s and 4 m/s)
+REFOUND_GAP = 0.5
 # a hand belongs to a body's wrist within this many of its palm lengths (wrist to middle knuckle: a hand's reach)
 MAX_WRIST_PALMS = 2.0
 
@@ -91,6 +105,7 @@ class _Track:
     hands: dict  # side -> HandResult | None
     seen: int = CONFIRM_FRAMES  # frames tracked (`CONFIRM_FRAMES` for one reported at once)
     number: int = -1  # the detector's count of tracks started before this one (`Person.track`)
+    behind: bool = False  # followed with the others hidden (`Detector._tracked`)
 
 
 class Detector:
@@ -145,6 +160,7 @@ class Detector:
         out = {"frame": np.asarray(self._frame), "started": np.asarray(self._started),
                "seen": np.asarray([t.seen for t in self._tracks], np.int64),
                "number": np.asarray([t.number for t in self._tracks], np.int64),
+               "behind": np.asarray([t.behind for t in self._tracks], bool),
                "hand_found": np.asarray(
             [[h is not None for h in pair] for pair in hands], bool).reshape(-1, 2),
                "searches_left": np.asarray(self._searches_left)}
@@ -157,7 +173,7 @@ class Detector:
         self._tracks = [_Track(result_of(state, "pose", PoseResult, k), {
             side: result_of(state, "hand", HandResult, 2 * k + j) if found[k, j] else None
             for j, side in enumerate(SIDES)},
-            int(state["seen"][k]), int(state["number"][k])) for k in range(len(found))]
+            int(state["seen"][k]), int(state["number"][k]), bool(state["behind"][k])) for k in range(len(found))]
         self._searches_left = int(state["searches_left"])
         self._frame, self._started = int(state["frame"]), int(state["started"])
 
@@ -178,45 +194,112 @@ class Detector:
 
     def _detect_people(self, image: np.ndarray, known: list[PoseResult]) -> tuple[list[PoseResult], bool]:
         """The people the person detector finds beside the ``known`` ones, and whether it found someone the
-        landmark model was unsure of (`DOUBTFUL_PRESENCE`)."""
+        landmark model was unsure of (`DOUBTFUL_PRESENCE`). First in the image as it is; then, after each pass
+        that found someone, in the image with the people known or found so far greyed out (`_hidden`), taking only
+        detections centred within one of their boxes: someone half hidden by another person, whose detection the
+        suppression of overlapping boxes merges into theirs, and on whose crop the landmark model goes to the one
+        it sees whole."""
         size = (image.shape[1], image.shape[0])
         found, unsure = list(known), False
-        for det in self._person_detections(image):
-            if len(found) >= self.max_people:
+        silhouettes = [self._pose.observe(image, p.roi, 0.0)[1] for p in known]
+        candidates, first = [(image, d) for d in self._person_detections(image)], True
+        while len(found) < self.max_people:
+            before = len(found)
+            for seen, det in candidates:
+                if len(found) >= self.max_people:
+                    break
+                result, silhouette = self._upright(seen, self._pose.detection_roi(det, size))
+                if result.presence < self.min_tracking_confidence:
+                    unsure |= result.presence >= DOUBTFUL_PRESENCE
+                elif seen is not image and np.sum(result.landmarks[:, 3] >= 0.5) < MIN_SEEN_BEHIND:
+                    continue
+                elif not any(_same_person(result, p, size) for p in found):
+                    found.append(result)
+                    silhouettes.append(silhouette)
+            if not found or len(found) == before and not first:
                 break
-            roi = self._pose.detection_roi(det, size)
-            if any(rect_iou(roi, p.roi) > 0.5 or rect_iou(roi, p.next_roi) > 0.5 or _at_hips(det, p, size)
-                   for p in found):
-                continue
-            result = self._upright(image, roi)
-            if result.presence < self.min_tracking_confidence:
-                unsure |= result.presence >= DOUBTFUL_PRESENCE
-            elif not any(_same_person(result, p, size) for p in found):
-                found.append(result)
+            seen, boxes = self._hidden(image, silhouettes), [landmark_box(p.landmarks, size) for p in found]
+            candidates, first = [(seen, d) for d in self._person_detections(seen)
+                                 if _overlaps(self._pose.detection_roi(d, size), boxes, size)], False
         return found[len(known):], unsure
 
-    def _upright(self, image: np.ndarray, roi: Rect) -> PoseResult:
-        """The landmarks in a person detection's ``roi``; where that stands the person on their head (turned by more
-        than `UPSIDE_DOWN`), also in it turned by 180 degrees, and the more present of the two. Cut by the frame's
-        edge, a person's detection can point the wrong way, and on the upturned crop the landmark model lays a
-        whole skeleton head down over them, which tracking then follows."""
-        result = self._pose.landmarks(image, roi, 0.0)
+    def _hidden(self, image: np.ndarray, silhouettes: list[Silhouette]) -> np.ndarray:
+        """The image with the ``silhouettes`` filled with mid grey: what is left for someone else."""
+        if not silhouettes:
+            return image
+        size = (image.shape[1], image.shape[0])
+        hidden = image.copy()
+        for silhouette in silhouettes:
+            hidden[silhouette.mask(size)] = 128
+        return hidden
+
+    def _upright(self, image: np.ndarray, roi: Rect) -> tuple[PoseResult, Silhouette]:
+        """The landmarks in a person detection's ``roi`` and the person's silhouette; where that stands the person
+        on their head (turned by more than `UPSIDE_DOWN`), also in it turned by 180 degrees, and the more present of
+        the two. Cut by the frame's edge, a person's detection can point the wrong way, and on the upturned crop the
+        landmark model lays a whole skeleton head down over them, which tracking then follows."""
+        seen = self._pose.observe(image, roi, 0.0)
         if abs(normalize_radians(roi.rotation)) <= UPSIDE_DOWN:
-            return result
-        turned = self._pose.landmarks(image, roi._replace(rotation=normalize_radians(roi.rotation + math.pi)), 0.0)
-        return turned if turned.presence > result.presence else result
+            return seen
+        turned = self._pose.observe(image, roi._replace(rotation=normalize_radians(roi.rotation + math.pi)), 0.0)
+        return turned if turned[0].presence > seen[0].presence else seen
+
+    def _tracked(self, image: np.ndarray) -> list[tuple[PoseResult | None, bool]]:
+        """Each track's pose this frame from its tracking ROI (None where lost) and whether it is behind someone.
+        In a crop holding two people the landmark model goes to the one it sees whole: a track behind someone
+        (found with others hidden: `_detect_people`, `_apart`) is followed on the image with the other tracks'
+        silhouettes greyed out, for as long as its landmarks' box overlaps theirs, and so is a track whose pose
+        strayed onto another track's person (lies on that one's last skeleton, not on its own)."""
+        size = (image.shape[1], image.shape[0])
+        tracks = self._tracks
+        seen = [(None, None) if t.behind else self._pose.observe(image, t.pose.next_roi, self.min_tracking_confidence)
+                for t in tracks]
+        poses, silhouettes = [list(column) for column in zip(*seen)] if seen else ([], [])
+        strayed = {k for k, pose in enumerate(poses) if pose is not None and not _coincide(pose, tracks[k].pose, size)
+                   and any(_coincide(pose, t.pose, size) for j, t in enumerate(tracks) if j != k)}
+        again = sorted(strayed | {k for k, t in enumerate(tracks) if t.behind})
+        for k in again:
+            others = [silhouettes[j] if silhouettes[j] is not None and j not in strayed else
+                      self._pose.observe(image, tracks[j].pose.next_roi, 0.0)[1] for j in range(len(tracks)) if j != k]
+            poses[k], silhouettes[k] = self._pose.observe(self._hidden(image, others), tracks[k].pose.next_roi,
+                                                          self.min_tracking_confidence)
+        poses, moved = self._apart(image, poses, silhouettes)
+        boxes = [None if p is None else landmark_box(p.landmarks, size) for p in poses]
+        return [(pose, (k in again or k in moved) and any(
+            overlap(boxes[k], box) > 0 for j, box in enumerate(boxes) if j != k and box is not None))
+            if pose is not None else (None, False) for k, pose in enumerate(poses)]
+
+    def _apart(self, image: np.ndarray, poses: list[PoseResult | None], silhouettes: list[Silhouette | None]
+               ) -> tuple[list[PoseResult | None], set[int]]:
+        """The tracks' poses (in the order of ``self._tracks``; None where lost), each on its own person, and the
+        tracks sought again. Where two coincide (`_coincide`), one landmark model left its person for the other,
+        whom the other track follows: the pose stays with the track whose last skeleton it is nearer
+        (`skeleton_gap`), and the other track is sought again in its ROI with that person's silhouette greyed out
+        (`_hidden`); lost if it still finds no one else."""
+        size = (image.shape[1], image.shape[0])
+        poses, moved = list(poses), set()
+        for i, j in itertools.combinations(range(len(poses)), 2):
+            a, b = poses[i], poses[j]
+            if a is None or b is None or not _coincide(a, b, size) and not _coincide(b, a, size):
+                continue
+            stays = skeleton_gap(a, self._tracks[i].pose, size) <= skeleton_gap(b, self._tracks[j].pose, size)
+            keeper, left = (i, j) if stays else (j, i)
+            found = self._pose.landmarks(self._hidden(image, [silhouettes[keeper]]), self._tracks[left].pose.next_roi,
+                                         self.min_tracking_confidence)
+            apart = found is not None and not _coincide(found, poses[keeper], size) and not _coincide(
+                poses[keeper], found, size)
+            poses[left] = found if apart else None
+            moved.add(left)
+        return poses, moved
 
     def _people(self, image: np.ndarray) -> list[_Track]:
-        size = (image.shape[1], image.shape[0])
         if self.static_image_mode:
             return [_Track(p, {s: None for s in SIDES}) for p in self._detect_people(image, [])[0]]
-        tracks = []
-        for track in self._tracks:
-            result = self._pose.landmarks(image, track.pose.next_roi, self.min_tracking_confidence)
-            if result is None or any(_coincide(result, t.pose, size) for t in tracks):
-                continue
-            tracks.append(_Track(result, track.hands, track.seen + 1, track.number))
-        new, lost = [], len(tracks) < len(self._tracks)
+        followed = self._tracked(image)
+        tracks = [_Track(pose, track.hands, track.seen + 1, track.number, behind)
+                  for track, (pose, behind) in zip(self._tracks, followed) if pose is not None]
+        missing = [track for track, (pose, _) in zip(self._tracks, followed) if pose is None]
+        new, lost = [], bool(missing)
         if not tracks or (len(tracks) < self.max_people
                           and (self._frame % self.redetect_every == 0 or lost or self._searches_left)):
             new, unsure = self._detect_people(image, [t.pose for t in tracks])
@@ -224,11 +307,22 @@ class Detector:
             # next search interval (a burst, not restarted while it lasts)
             self._searches_left = (self.redetect_every - 1 if (lost or unsure) and not self._searches_left
                                    else max(self._searches_left - 1, 0))
-        # the first person of a stream is reported at once; anyone found beside others once tracked in
-        # `CONFIRM_FRAMES` frames (a detection that does not survive them is a false one, often a part of someone)
-        tracks += [_Track(p, {s: None for s in SIDES}, CONFIRM_FRAMES if not tracks and k == 0 else 1,
-                          self._started + k) for k, p in enumerate(new)]
-        self._started += len(new)
+        # someone found where a track was lost this frame is its person, found again; the first person of a stream
+        # is reported at once; anyone else found beside others once tracked in `CONFIRM_FRAMES` frames (a detection
+        # that does not survive them is a false one, often a part of someone); found with the others hidden, they
+        # are followed so while they overlap them
+        size = (image.shape[1], image.shape[0])
+        gaps = np.array([[skeleton_gap(p, t.pose, size) for t in missing] for p in new]).reshape(len(new), len(missing))
+        again = dict(gated_pairs(np.where(gaps < REFOUND_GAP, gaps, np.inf)))
+        first = not tracks
+        for k, p in enumerate(new):
+            if k in again:
+                track = missing[again[k]]
+                tracks.append(_Track(p, track.hands, track.seen + 1, track.number, bool(tracks)))
+            else:
+                tracks.append(_Track(p, {s: None for s in SIDES}, CONFIRM_FRAMES if first and not k else 1,
+                                     self._started, bool(tracks)))
+                self._started += 1
         return tracks
 
     # -- hands ------------------------------------------------------------------------------------------------
@@ -313,9 +407,29 @@ class Detector:
 
 
 def _coincide(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
-    """Whether ``new`` is ``known``'s pose again: their tracking rects overlap (IoU above 0.5), or ``new`` lies on
+    """Whether ``new`` is ``known``'s pose again: their skeletons coincide (`skeleton_gap`), or ``new`` lies on
     ``known``'s body (`_on_body`)."""
-    return rect_iou(new.next_roi, known.next_roi) > 0.5 or _on_body(new, known, size)
+    return skeleton_gap(new, known, size) < SAME_SKELETON or _on_body(new, known, size)
+
+
+def _torso(points: np.ndarray) -> float:
+    """The length (pixels) from mid-hip to mid-shoulder of BlazePose landmarks (33, 2) in pixels."""
+    return float(np.linalg.norm(points[[11, 12]].mean(0) - points[[23, 24]].mean(0)))
+
+
+def skeleton_gap(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> float:
+    """The mean distance of ``new``'s landmarks from ``known``'s, over those visible in both (all of them when
+    fewer than four are), in ``known``'s torso lengths; the smaller of its two readings of left and right (the
+    landmark model exchanges them on a person seen from behind)."""
+    scale = np.asarray(size, np.float64)
+    a, b = new.landmarks[:, :2] * scale, known.landmarks[:, :2] * scale
+    torso = max(_torso(b), 1.0)
+    gaps = []
+    for order in (np.arange(33), SIDES_EXCHANGED):
+        both = (new.landmarks[order, 3] >= 0.5) & (known.landmarks[:, 3] >= 0.5)
+        both = both if both.sum() >= 4 else np.ones(33, bool)
+        gaps.append(np.linalg.norm(a[order][both] - b[both], axis=1).mean() / torso)
+    return float(min(gaps))
 
 
 def _on_body(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
@@ -350,12 +464,10 @@ def _same_person(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> b
     return bool(y1 - y0 < 0.5 * (tall[3] - tall[1]) and overlap(box, rect) > 0.8 * area)
 
 
-def _at_hips(det: Detection, known: PoseResult, size: tuple[int, int]) -> bool:
-    """Whether a person detection's centre (its mid-hip keypoint) lies within half a torso of a known person's
-    mid-hip: the same person again (seen whole or, on a square of the image, in part)."""
-    scale = np.asarray(size, np.float64)
-    hips, shoulders = (known.landmarks[list(ids), :2].mean(axis=0) * scale for ids in ((23, 24), (11, 12)))
-    return bool(np.linalg.norm(det.keypoints[0] * scale - hips) < 0.5 * np.linalg.norm(shoulders - hips))
+def _overlaps(roi: Rect, boxes: list[np.ndarray], size: tuple[int, int]) -> bool:
+    """Whether a ROI's extent, its rotation left out, overlaps one of the pixel ``boxes``."""
+    extent = np.asarray(rect_extent(roi)) * np.tile(size, 2)
+    return any(overlap(extent, box) > 0 for box in boxes)
 
 
 def _person(track: _Track, size: tuple[int, int]) -> Person:

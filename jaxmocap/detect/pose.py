@@ -12,10 +12,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 
 from .models import TFLiteModel
-from .roi import Rect, alignment_rect, crop, project, rotate_world, transform_rect
+from .roi import Rect, alignment_rect, crop, crop_matrix, project, rotate_world, transform_rect
 from .ssd import Detection, decode, remove_letterbox, ssd_anchor_centers, weighted_nms
 
 DETECTOR_SIZE = 224
@@ -93,12 +94,19 @@ class PoseEstimator:
 
     def landmarks(self, image: np.ndarray, roi: Rect, min_presence: float = MIN_PRESENCE) -> PoseResult | None:
         """The pose inside ``roi`` of a BGR image, or None when the model says no person is there."""
+        return self.observe(image, roi, min_presence)[0]
+
+    def observe(self, image: np.ndarray, roi: Rect, min_presence: float = MIN_PRESENCE
+                ) -> tuple[PoseResult | None, Silhouette]:
+        """The pose inside ``roi`` of a BGR image (None when the model says no person is there), and the
+        person's silhouette, from one run of the landmark model."""
         ih, iw = image.shape[:2]
         tensor, padding = crop(image, roi, LANDMARK_SIZE, (0.0, 1.0), border_zero=False)
-        raw, flag, _segmentation, heatmap, raw_world = self._landmarker(tensor)
+        raw, flag, segmentation, heatmap, raw_world = self._landmarker(tensor)
+        silhouette = Silhouette(segmentation[0, :, :, 0].astype(np.float32), roi)
         presence = float(flag.reshape(-1)[0])
         if presence < min_presence:
-            return None
+            return None, silhouette
         lm = raw.reshape(39, 5).astype(np.float64)
         norm = np.empty_like(lm)
         norm[:, :3] = lm[:, :3] / LANDMARK_SIZE
@@ -107,7 +115,21 @@ class PoseEstimator:
         image_lm = project(norm, roi, padding)
         world = rotate_world(raw_world.reshape(39, 3)[:33].astype(np.float64), roi)
         next_roi = transform_rect(alignment_rect(image_lm[33, :2], image_lm[34, :2], (iw, ih)), (iw, ih), ROI_SCALE)
-        return PoseResult(image_lm[:33], world, presence, roi, next_roi)
+        return PoseResult(image_lm[:33], world, presence, roi, next_roi), silhouette
+
+
+class Silhouette(NamedTuple):
+    """The landmark model's segmentation of the person in ``roi``: ``logits`` (256, 256) over the ROI's crop."""
+
+    logits: np.ndarray
+    roi: Rect
+
+    def mask(self, image_size: tuple[int, int]) -> np.ndarray:
+        """(H, W) bool for an image of ``image_size`` (width, height): the pixels the model holds more likely the
+        person's than not (none outside the ROI)."""
+        matrix, _ = crop_matrix(self.roi, image_size, LANDMARK_SIZE)
+        inside = (self.logits > 0).astype(np.uint8)
+        return cv2.warpPerspective(inside, matrix, image_size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP) > 0
 
 
 def rect_extent(r: Rect) -> tuple[float, float, float, float]:

@@ -71,7 +71,19 @@ def crop(image: np.ndarray, rect: Rect | None, size: int, value_range: tuple[flo
 
     Returns the tensor and the letterbox padding (left, top, right, bottom) as fractions of the tensor.
     """
-    ih, iw = image.shape[:2]
+    matrix, padding = crop_matrix(rect, image.shape[1::-1], size)
+    warped = warp_perspective(image, matrix, size, border_zero)
+    lo, hi = value_range
+    tensor = warped[None, :, :, ::-1].astype(np.float32) * np.float32((hi - lo) / 255.0) + np.float32(lo)
+    return tensor, padding
+
+
+def crop_matrix(rect: Rect | None, image_size: tuple[int, int], size: int
+                ) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The perspective matrix (3, 3) from image pixels to the ``size`` square tensor of ``rect`` (whole image if
+    None), its short side grown to a square, and that letterbox padding (left, top, right, bottom) as fractions of
+    the tensor."""
+    iw, ih = image_size
     if rect is None:
         cx, cy, rw, rh, rot = iw / 2, ih / 2, float(iw), float(ih), 0.0
     else:
@@ -87,11 +99,7 @@ def crop(image: np.ndarray, rect: Rect | None, size: int, value_range: tuple[flo
         rw = rh
     src = cv2.boxPoints(((cx, cy), (rw, rh), math.degrees(rot)))
     dst = np.array([[0, size], [0, 0], [size, 0], [size, size]], np.float32)
-    matrix = cv2.getPerspectiveTransform(src.astype(np.float32), dst)
-    warped = warp_perspective(image, matrix, size, border_zero)
-    lo, hi = value_range
-    tensor = warped[None, :, :, ::-1].astype(np.float32) * np.float32((hi - lo) / 255.0) + np.float32(lo)
-    return tensor, (pad_x, pad_y, pad_x, pad_y)
+    return cv2.getPerspectiveTransform(src.astype(np.float32), dst), (pad_x, pad_y, pad_x, pad_y)
 
 
 def warp_perspective(image: np.ndarray, matrix: np.ndarray, size: int, border_zero: bool) -> np.ndarray:
