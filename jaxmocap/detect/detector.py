@@ -15,7 +15,7 @@ from .assignment import gated_pairs
 from .hands import MIN_PRESENCE as MIN_HAND_PRESENCE
 from .hands import POSE_HAND_POINTS, HandEstimator, HandResult, keeps_tracking, pose_hand_roi
 from .models import ensure_models, landmark_model_path
-from .pose import PoseEstimator, PoseResult, Silhouette, landmark_box, overlap, rect_extent
+from .pose import PoseEstimator, PoseResult, Silhouette, landmark_box, overlap, rect_extent, rect_iou
 from .roi import Rect, normalize_radians
 from .ssd import Detection, in_image, square_tiles
 from .track_state import result_of, results_state
@@ -39,8 +39,9 @@ SAME_SKELETON = 0.25
 # least this many of their 33 landmarks (visibility at least 0.5): a third of a body, as of anyone half hidden;
 # a skeleton laid over a thing in the background is mostly guessed
 MIN_SEEN_BEHIND = 11
-# a track lost in a frame is its person found again in that frame by the person detector when their landmarks lie
-# this close on average (torso lengths: about 25 cm, what a body moves in a frame at 15 frames/s and 4 m/s)
+# a track's person is not further from their last skeleton than this (torso lengths, on average over the landmarks:
+# about 25 cm, what a body moves in a frame at 15 frames/s and 4 m/s; people move a tenth of it in a frame at 30
+# frames/s); a track lost in a frame is continued by someone the person detector finds this close in that frame
 REFOUND_GAP = 0.5
 # a hand belongs to a body's wrist within this many of its palm lengths (wrist to middle knuckle: a hand's reach)
 MAX_WRIST_PALMS = 2.0
@@ -194,30 +195,36 @@ class Detector:
 
     def _detect_people(self, image: np.ndarray, known: list[PoseResult]) -> tuple[list[PoseResult], bool]:
         """The people the person detector finds beside the ``known`` ones, and whether it found someone the
-        landmark model was unsure of (`DOUBTFUL_PRESENCE`). First in the image as it is; then, after each pass
-        that found someone, in the image with the people known or found so far greyed out (`_hidden`), taking only
-        detections centred within one of their boxes: someone half hidden by another person, whose detection the
-        suppression of overlapping boxes merges into theirs, and on whose crop the landmark model goes to the one
-        it sees whole."""
+        landmark model was unsure of (`DOUBTFUL_PRESENCE`). First in the image as it is, passing over detections
+        whose ROI is mostly one found already (IoU above 0.5: them again); then, after each pass that found
+        someone, in the image with the people known or found so far greyed out (`_hidden`), taking detections whose
+        ROI overlaps one of them and who show a third of their landmarks (`MIN_SEEN_BEHIND`): someone half hidden
+        by another person, whose detection the suppression of overlapping boxes merges into theirs, and on whose
+        crop the landmark model goes to the one it sees whole."""
         size = (image.shape[1], image.shape[0])
         found, unsure = list(known), False
-        silhouettes = [self._pose.observe(image, p.roi, 0.0)[1] for p in known]
+        silhouettes: list[Silhouette | None] = [None] * len(known)  # the known ones' when first needed
         candidates, first = [(image, d) for d in self._person_detections(image)], True
         while len(found) < self.max_people:
             before = len(found)
             for seen, det in candidates:
                 if len(found) >= self.max_people:
                     break
-                result, silhouette = self._upright(seen, self._pose.detection_roi(det, size))
+                roi = self._pose.detection_roi(det, size)
+                if first and any(rect_iou(roi, p.roi) > 0.5 or rect_iou(roi, p.next_roi) > 0.5 for p in found):
+                    continue
+                result, silhouette = self._upright(seen, roi)
                 if result.presence < self.min_tracking_confidence:
                     unsure |= result.presence >= DOUBTFUL_PRESENCE
-                elif seen is not image and np.sum(result.landmarks[:, 3] >= 0.5) < MIN_SEEN_BEHIND:
+                elif not first and np.sum(result.landmarks[:, 3] >= 0.5) < MIN_SEEN_BEHIND:
                     continue
                 elif not any(_same_person(result, p, size) for p in found):
                     found.append(result)
                     silhouettes.append(silhouette)
             if not found or len(found) == before and not first:
                 break
+            silhouettes = [self._pose.observe(image, p.roi, 0.0)[1] if s is None else s
+                           for p, s in zip(found, silhouettes)]
             seen, boxes = self._hidden(image, silhouettes), [landmark_box(p.landmarks, size) for p in found]
             candidates, first = [(seen, d) for d in self._person_detections(seen)
                                  if _overlaps(self._pose.detection_roi(d, size), boxes, size)], False
@@ -246,28 +253,38 @@ class Detector:
 
     def _tracked(self, image: np.ndarray) -> list[tuple[PoseResult | None, bool]]:
         """Each track's pose this frame from its tracking ROI (None where lost) and whether it is behind someone.
-        In a crop holding two people the landmark model goes to the one it sees whole: a track behind someone
-        (found with others hidden: `_detect_people`, `_apart`) is followed on the image with the other tracks'
-        silhouettes greyed out, for as long as its landmarks' box overlaps theirs, and so is a track whose pose
-        strayed onto another track's person (lies on that one's last skeleton, not on its own)."""
+        A pose that does not stay with its track's person (`_stays`) went to someone else: the track is sought
+        again with that one's silhouette greyed out, and is lost if it is not found near where it was. In a crop
+        holding two people the landmark model goes to the one it sees whole, so a track behind someone (found with
+        others hidden, `_detect_people`; sought again, here or in `_apart`) is followed on the image with the
+        other tracks' silhouettes greyed out, for as long as its landmarks' box overlaps theirs."""
         size = (image.shape[1], image.shape[0])
         tracks = self._tracks
         seen = [(None, None) if t.behind else self._pose.observe(image, t.pose.next_roi, self.min_tracking_confidence)
                 for t in tracks]
         poses, silhouettes = [list(column) for column in zip(*seen)] if seen else ([], [])
-        strayed = {k for k, pose in enumerate(poses) if pose is not None and not _coincide(pose, tracks[k].pose, size)
-                   and any(_coincide(pose, t.pose, size) for j, t in enumerate(tracks) if j != k)}
+        strayed = {k for k, pose in enumerate(poses) if pose is not None and not self._stays(pose, k, size)}
         again = sorted(strayed | {k for k, t in enumerate(tracks) if t.behind})
         for k in again:
-            others = [silhouettes[j] if silhouettes[j] is not None and j not in strayed else
-                      self._pose.observe(image, tracks[j].pose.next_roi, 0.0)[1] for j in range(len(tracks)) if j != k]
-            poses[k], silhouettes[k] = self._pose.observe(self._hidden(image, others), tracks[k].pose.next_roi,
-                                                          self.min_tracking_confidence)
+            others = [silhouettes[k]] if k in strayed else []  # whom its pose went to
+            others += [silhouettes[j] if silhouettes[j] is not None and j not in strayed else
+                       self._pose.observe(image, tracks[j].pose.next_roi, 0.0)[1] for j in range(len(tracks)) if j != k]
+            pose, silhouette = self._pose.observe(self._hidden(image, others), tracks[k].pose.next_roi,
+                                                  self.min_tracking_confidence)
+            poses[k], silhouettes[k] = (pose, silhouette) if pose is not None and self._stays(pose, k, size) else (
+                None, None)
         poses, moved = self._apart(image, poses, silhouettes)
         boxes = [None if p is None else landmark_box(p.landmarks, size) for p in poses]
         return [(pose, (k in again or k in moved) and any(
             overlap(boxes[k], box) > 0 for j, box in enumerate(boxes) if j != k and box is not None))
             if pose is not None else (None, False) for k, pose in enumerate(poses)]
+
+    def _stays(self, pose: PoseResult, k: int, size: tuple[int, int]) -> bool:
+        """Whether a pose found by track ``k`` is its person's: within `REFOUND_GAP` of the track's last skeleton
+        (no body moves further in a frame), and not on another track's last skeleton rather than on its own."""
+        last = self._tracks[k].pose
+        return skeleton_gap(pose, last, size) < REFOUND_GAP and (_coincide(pose, last, size) or not any(
+            _coincide(pose, t.pose, size) for j, t in enumerate(self._tracks) if j != k))
 
     def _apart(self, image: np.ndarray, poses: list[PoseResult | None], silhouettes: list[Silhouette | None]
                ) -> tuple[list[PoseResult | None], set[int]]:
