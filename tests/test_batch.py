@@ -135,7 +135,8 @@ def test_bad_inputs_fail_alone_with_one_line_causes(local_batch, clips):
     assert "1 of 3 videos done" in proc.stdout and "2 failed" in proc.stdout
     good, empty, corrupt = ledger(out)
     assert (good["input"], good["status"], good["error"]) == (str(clips["good"]), "done", None)
-    assert good["frames"] == 8 and good["valid"] == 8 and good["people"] == 1 and good["reprojection_px"] < 25
+    # the people: the subject and the bystander at the back wall
+    assert good["frames"] == 8 and good["valid"] == 8 and good["people"] == 2 and good["reprojection_px"] < 25
     for record, path in ((empty, clips["empty"]), (corrupt, clips["corrupt"])):
         assert record["status"] == "failed" and str(path) in record["error"] and "\n" not in record["error"]
         assert record["frames"] is None and record["seconds"] >= 0

@@ -475,7 +475,7 @@ def test_someone_who_comes_in_is_found_within_a_quarter_second():
             frame[max(y0, 0):y1, max(x0, 0):x1] = 128
         counts.append(len(detector(frame)))
     assert all(c >= 1 for c in counts) and max(counts[:hidden]) == 1
-    assert 2 in counts[hidden:hidden + 15]
+    assert max(counts[hidden:hidden + 15]) >= 2  # he, and with him the bystander at the back wall
 
 
 def test_someone_cut_by_the_frames_edge_is_found_within_a_fifth_of_a_second():

@@ -20,7 +20,8 @@ CHUNK = 4  # the resumed run's, as tests/test_pipeline.py's: the per-chunk stage
 @pytest.fixture(scope="module")
 def whole_clip(tmp_path_factory):
     out = tmp_path_factory.mktemp("multi")
-    report = pipeline_job.run_bodies(RunConfig(CLIP, chunk_size=50, max_people=3, progress=False), out)
+    # the two who cross, as issue 24 measures them (with three, the bystander at the back wall is found too)
+    report = pipeline_job.run_bodies(RunConfig(CLIP, chunk_size=50, max_people=2, progress=False), out)
     return out, report
 
 

@@ -137,7 +137,8 @@ def test_frankmocap_pickles_reproduce_the_projection(result):
         assert list(d) == PKL_KEYS and (d["demo_type"], d["smpl_type"], d["save_mesh"]) == ("frank", "smplx", False)
         assert d["image_path"] == str((out / "frames" / f"{20 + t:05d}.jpg").absolute())
         assert cv2.imread(d["image_path"]).shape == (1920, 1080, 3)  # --save-frames wrote it
-        assert len(d["pred_output_list"]) == len(d["body_bbox_list"]) == len(d["hand_bbox_list"]) == 1
+        # everyone found: the subject first (the projection below), then the bystander at the back wall
+        assert len(d["pred_output_list"]) == len(d["body_bbox_list"]) == len(d["hand_bbox_list"]) in (1, 2)
     assert_frankmocap_projection(data, 0, motion)
     for f in files:
         ops = [(op.name, arg) for op, arg, _ in pickletools.genops(f.read_bytes())]
