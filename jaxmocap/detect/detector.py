@@ -326,8 +326,8 @@ class Detector:
                                    else max(self._searches_left - 1, 0))
         # someone found where a track was lost this frame is its person, found again; the first person of a stream
         # is reported at once; anyone else found beside others once tracked in `CONFIRM_FRAMES` frames (a detection
-        # that does not survive them is a false one, often a part of someone); found with the others hidden, they
-        # are followed so while they overlap them
+        # that does not survive them is a false one, often a part of someone), and followed with the others hidden
+        # for as long as they overlap them (`_tracked`)
         size = (image.shape[1], image.shape[0])
         gaps = np.array([[skeleton_gap(p, t.pose, size) for t in missing] for p in new]).reshape(len(new), len(missing))
         again = dict(gated_pairs(np.where(gaps < REFOUND_GAP, gaps, np.inf)))
