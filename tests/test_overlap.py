@@ -10,7 +10,7 @@ import pytest
 
 from bench.stand_ins import body25, followed, near_crop, pasted, read, tracked
 from jaxmocap.detect import Detector
-from jaxmocap.detect.detector import SAME_SKELETON, _coincide, skeleton_gap
+from jaxmocap.detect.detector import SAME_SKELETON, SIDES_EXCHANGED, _coincide, skeleton_gap
 from jaxmocap.detect.pose import PoseResult, rect_iou
 from jaxmocap.detect.roi import Rect
 
@@ -50,7 +50,7 @@ def test_one_person_seen_twice_is_one_whichever_side_the_model_calls_left(skelet
     noise = np.random.default_rng(0).normal(0, 0.03 * torso, (33, 2))
     again = body.copy()
     again[:, :2] += noise
-    exchanged = again[[0, 4, 5, 6, 1, 2, 3, 8, 7, 10, 9, *np.arange(11, 33).reshape(-1, 2)[:, ::-1].ravel()]]
+    exchanged = again[SIDES_EXCHANGED]
     for other in (again, exchanged):
         assert skeleton_gap(_pose(other, size), _pose(body, size), size) < SAME_SKELETON / 2
         assert _coincide(_pose(other, size), _pose(body, size), size)

@@ -461,7 +461,7 @@ def _on_body(new: PoseResult, known: PoseResult, size: tuple[int, int]) -> bool:
     visible = new.landmarks[:, 3] >= 0.5
     points = points[visible] if visible.sum() >= 4 else points
     skeleton = known.landmarks[:, :2] * scale
-    torso = np.linalg.norm(skeleton[[11, 12]].mean(0) - skeleton[[23, 24]].mean(0))
+    torso = _torso(skeleton)
     start, bone = skeleton[BONES[:, 0]], skeleton[BONES[:, 1]] - skeleton[BONES[:, 0]]
     along = np.clip(np.einsum("pbk,bk->pb", points[:, None] - start, bone) / np.maximum(np.sum(bone**2, 1), 1e-9),
                     0.0, 1.0)
