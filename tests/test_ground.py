@@ -60,7 +60,7 @@ def stepping(model, rotation: np.ndarray, t: np.ndarray, seed: int = 0):
 def world_keys(model, params, valid) -> dict:
     """One person's world keys, standing on the floor their motion shows."""
     people = {0: (params, valid)}
-    return ground.world_arrays(model, people, 0, ground.standing(model, people, FPS))[0]
+    return ground.world_arrays(model, people, 0, ground.standing(model, people, FPS, 0))[0]
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -164,7 +164,7 @@ def test_a_turning_camera_sees_the_same_world(model):
     valid = np.ones(frames, bool)
     held = world_keys(model, params, valid)
     people = {0: (seen, valid)}
-    turning = ground.world_arrays(model, people, 0, ground.standing(model, people, FPS, scene_from_camera=turns),
+    turning = ground.world_arrays(model, people, 0, ground.standing(model, people, FPS, 0, scene_from_camera=turns),
                                   turns)[0]
     np.testing.assert_allclose(turning["floor"], held["floor"], atol=1e-4)
     assert np.mean(turning["contact"] == held["contact"]) > 0.99

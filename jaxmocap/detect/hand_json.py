@@ -10,7 +10,6 @@ import numpy as np
 
 from smplx_jax import SIDES
 
-from .detector import search_interval
 from .hand_tracker import Hand, HandTracker
 from .json_output import write_detections
 
@@ -42,8 +41,7 @@ def detect_hands_media(input: str | os.PathLike, out_dir: str | os.PathLike, ove
     `detect_media` (the same names and overlays), hands only: ``"pose_keypoints_2d": []``, as OpenPose writes with
     ``--body 0`` (`hands_openpose`). Returns the JSON paths in frame order."""
     def detect_in(media, still):
-        tracker = HandTracker(static_image_mode=still, max_hands=max_hands, model_dir=model_dir,
-                              redetect_every=search_interval(media.fps))
+        tracker = HandTracker(static_image_mode=still, max_hands=max_hands, model_dir=model_dir)
         return lambda image: hands_openpose(*_rows(tracker(image)), max_hands)
 
     return write_detections(input, out_dir, overlay, progress, "detect hands", detect_in, body=False)

@@ -58,7 +58,8 @@ class HandTracker:
 
     ``static_image_mode=True``: every call is an unrelated image (palm detection, then the landmarks, refined once
     from their own box). ``False``: a video; each hand's next box comes from its landmarks, and the palm detector
-    runs while fewer than ``max_hands`` are tracked, at once when none is and then every ``redetect_every`` frames.
+    runs on every frame where fewer than ``max_hands`` are tracked (as mediapipe's hand solution gates it): a hand
+    lost to blur or speed is sought again in the next frame, not after an interval.
     A hand found again within ``remember`` frames of losing it, near where it was (its centre within its size),
     takes up its identity and handedness. A hand's side is its handedness averaged over the frames it is tracked;
     of two hands taken for the same side, the one less likely so gets the other (two hands in view are mostly one
@@ -67,7 +68,7 @@ class HandTracker:
 
     def __init__(self, static_image_mode: bool = True, max_hands: int = 2, model_dir=None, num_threads: int = 2,
                  min_detection_confidence: float = MIN_PALM_SCORE, min_tracking_confidence: float = MIN_PRESENCE,
-                 redetect_every: int = 6, remember: int = 30):
+                 remember: int = 30):
         if max_hands < 1:
             raise ValueError(f"max_hands must be >= 1, got {max_hands}")
         paths = ensure_models(model_dir)
@@ -75,7 +76,6 @@ class HandTracker:
         self.max_hands = max_hands
         self.min_detection_confidence = min_detection_confidence
         self.min_tracking_confidence = min_tracking_confidence
-        self.redetect_every = redetect_every
         self.remember = remember
         self._hands = HandEstimator(paths["palm_detection_full.tflite"], paths["hand_landmark_full.tflite"],
                                     num_threads=num_threads)
@@ -134,7 +134,7 @@ class HandTracker:
                 continue
             tracks.append(_Track(track.hand_id, hand, track.right_total + hand.right_score, track.frames + 1,
                                  self._frame))
-        if len(tracks) < self.max_hands and (not tracks or self._frame % self.redetect_every == 0):
+        if len(tracks) < self.max_hands:
             for hand in self._found(image, [t.result for t in tracks], refine=False):
                 before = _nearest(lost, hand, (image.shape[1], image.shape[0]))
                 if before is None:

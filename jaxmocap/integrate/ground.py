@@ -6,21 +6,23 @@ camera's. The world frame is fixed in the scene, so a turning camera's ``camera_
 
 The floor's normal is the scene's vertical where its upright edges show it (`jaxmocap.detect.verticals`: a fraction
 of a degree through the right lens). Without them it is fitted to the feet: a foot carrying weight is at rest, on
-the floor, so the floor is the plane of the soles under the heels and toes while they rest (`floor_plane`; each
+the floor, so the floor is the plane of the soles under the heels and toes while they rest (`floor_planes`; each
 joint stands its own height above its sole, `sole_heights`), its normal drawn towards the torsos' mean up direction
 (people stand and walk upright), which decides it where the resting feet span too little of the floor to tilt a
 plane; a monocular fit's feet tilt it by tens of degrees where a person stays in one place. The floor's height is
-the resting soles' either way. The world frame (`world_frame`): y up along the floor's normal, the floor (the
-soles' plane) y = 0, z the scene's forward direction along the floor, the origin on the floor under the main
-person's pelvis in their first valid frame. `standing` finds the floor and the feet's contacts of a clip's motion
-(the clip fit is then refitted on them: `ClipGround`), `world_arrays` its motion.npz world keys.
+the resting soles' either way, each person's fit at its own (their scale, which one view cannot see, moves it), the
+scene's the main person's; the others are moved about the camera onto it in the world. The world frame
+(`world_frame`): y up along the floor's normal, the floor (the soles' plane) y = 0, z the scene's forward direction
+along the floor, the origin on the floor under the main person's pelvis in their first valid frame. `standing` finds
+the floor and the feet's contacts of a clip's motion (the clip fit is then refitted on them: `ClipGround`),
+`world_arrays` its motion.npz world keys.
 """
 
 import math
 from typing import NamedTuple
 
 import numpy as np
-from jaxtyping import Bool, Float
+from jaxtyping import Bool, Float, Int
 from scipy.spatial.transform import Rotation
 
 import smplx_jax
@@ -102,32 +104,50 @@ def stance_weights(resting: Bool[np.ndarray, "T K"]) -> Float[np.ndarray, "T K"]
     return weights
 
 
-def floor_plane(feet: Float[np.ndarray, "N 3"], above_sole: Float[np.ndarray, "N"], weights: Float[np.ndarray, "N"],
-                up: Float[np.ndarray, "3"], known_up: bool = False) -> Floor:
-    """The floor under the resting heels and toes (camera frame; each ``above_sole`` metres above its sole, each
-    weighed by ``weights``: 0 where not resting, `stance_weights`), its normal pointing ``up``'s way: the soles'
-    heights weighed against their spread about the plane (at least `MIN_HEIGHT_NOISE_M`), the normal's lean from
-    ``up`` against `UP_LEAN_RAD` (a Gaussian maximum a posteriori plane); refitted with the soles within
-    `CONTACT_HEIGHT_M` of it. ``known_up``: the normal is ``up`` (the scene's vertical), only the height fitted.
-    Without resting points: the plane normal to ``up`` under the lowest tenth of them."""
+def floor_planes(feet: Float[np.ndarray, "N 3"], above_sole: Float[np.ndarray, "N"], weights: Float[np.ndarray, "N"],
+                 person: Int[np.ndarray, "N"], up: Float[np.ndarray, "3"], known_up: bool = False) -> list[Floor]:
+    """The floor under the resting heels and toes of people ``0..P-1`` (``person``: each point's; camera frame;
+    each ``above_sole`` metres above its sole, each weighed by ``weights``: 0 where not resting, `stance_weights`),
+    its normal pointing ``up``'s way, as each person's fit stands on it: one plane each, all parallel. A monocular
+    fit's scale (its depth along the rays: mostly the stature it cannot see, some per cent) scales a person's
+    positions about the camera, which moves the plane of their soles along its normal and never turns it: a person
+    seen a tenth too far stands a tenth of the camera's height below the others. The normal is fitted to everyone's
+    soles, each person's about their own centre: the soles' heights weighed against their spread about their plane
+    (at least `MIN_HEIGHT_NOISE_M`), the normal's lean from ``up`` against `UP_LEAN_RAD` (a Gaussian maximum a
+    posteriori plane); refitted with the soles within `CONTACT_HEIGHT_M` of their plane. ``known_up``: the normal is
+    ``up`` (the scene's vertical), only the heights fitted. A person without resting points: the plane under the
+    lowest tenth of their soles."""
     up = np.asarray(up, np.float64) / np.linalg.norm(up)
     feet, above_sole = np.asarray(feet, np.float64), np.asarray(above_sole, np.float64)
-    resting = np.asarray(weights) > 0
-    if not resting.any():
-        return Floor(up, -float(np.quantile(feet @ up - above_sole, 0.1))) if len(feet) else Floor(up, 0.0)
+    person, weights = np.asarray(person), np.asarray(weights, np.float64)
+    groups = [person == p for p in range(int(person.max(initial=-1)) + 1)]
+    resting = weights > 0
+    normal = up
+    offsets = np.array([-float(np.median(feet[g & resting] @ up - above_sole[g & resting])) if (g & resting).any()
+                        else _lowest(feet[g] @ up - above_sole[g]) for g in groups])
     prior = (np.eye(3) - np.outer(up, up)) / UP_LEAN_RAD**2
-    floor = Floor(up, -float(np.median(feet[resting] @ up - above_sole[resting])))
-    for _ in range(PLANE_ITERATIONS):
-        soles = feet - above_sole[:, None] * floor.normal  # (a resting foot is flat: its sole straight below)
-        touching = resting & (np.abs(floor.heights(soles)) < CONTACT_HEIGHT_M)
-        w = np.where(touching if touching.sum() >= 3 else resting, weights, 0.0)
-        centre = w @ soles / w.sum()
-        noise = max(MIN_HEIGHT_NOISE_M, float(np.sqrt(w @ floor.heights(soles) ** 2 / w.sum())))
-        spread = (w[:, None] * (soles - centre)).T @ (soles - centre) / noise**2
+    for _ in range(PLANE_ITERATIONS if resting.any() else 0):
+        soles = feet - above_sole[:, None] * normal  # (a resting foot is flat: its sole straight below)
+        heights = soles @ normal + offsets[person]
+        touching = resting & (np.abs(heights) < CONTACT_HEIGHT_M)
+        w = np.zeros(len(feet))
+        for g in groups:  # a person's soles touching their plane (all their resting ones where fewer than 3 do)
+            w[g] = np.where((touching if (touching & g).sum() >= 3 else resting)[g], weights[g], 0.0)
+        seen = np.array([w[g].sum() > 0 for g in groups])
+        centres = np.stack([w[g] @ soles[g] / w[g].sum() if s else np.zeros(3) for g, s in zip(groups, seen)])
+        about = soles - centres[person]
+        noise = max(MIN_HEIGHT_NOISE_M, float(np.sqrt(w @ heights**2 / w.sum())))
+        spread = (w[:, None] * about).T @ about / noise**2
         normal = up if known_up else np.linalg.eigh(spread + prior)[1][:, 0]  # the smallest eigenvalue's
         normal = normal if normal @ up > 0 else -normal
-        floor = Floor(normal, -float(normal @ centre))
-    return floor
+        offsets = np.array([-float(normal @ c) if s else _lowest(feet[g] @ normal - above_sole[g])
+                            for g, c, s in zip(groups, centres, seen)])
+    return [Floor(normal, float(offset)) for offset in offsets]
+
+
+def _lowest(heights: Float[np.ndarray, "n"]) -> float:
+    """The offset of the plane under the lowest tenth of ``heights`` (0 without any)."""
+    return -float(np.quantile(heights, 0.1)) if len(heights) else 0.0
 
 
 def world_frame(floor: Floor, origin: Float[np.ndarray, "3"]) -> Float[np.ndarray, "4 4"]:
@@ -192,28 +212,43 @@ def camera_floors(camera_from_world: Float[np.ndarray, "T 4 4"]) -> Float[np.nda
     return np.concatenate([up, -np.sum(up * camera_from_world[:, :3, 3], 1, keepdims=True)], 1)
 
 
+def main_person(valid: dict[int, Bool[np.ndarray, "T"]]) -> int | None:
+    """The person valid in most frames (``valid``: by identity; the first seen of those tied), whom the scene's
+    floor and world frame belong to (motion.npz's person); None without anyone."""
+    return max(valid, key=lambda i: (int(np.sum(valid[i])), -i), default=None)
+
+
 class Standing(NamedTuple):
-    """The floor under a clip's people (`standing`) and, by identity, each one's heels' and toes' heights above
-    their soles (`sole_heights`) and their contacts with it (`contacts`, ``(T, 4)``)."""
+    """The floor under a clip's people (`standing`): the scene's (``floor``: where the main person stands) and, by
+    identity, the plane each one's fit stands on (``planes``: parallel to it, `floor_planes`), their heels' and
+    toes' heights above their soles (`sole_heights`) and their contacts with their plane (`contacts`, ``(T, 4)``)."""
 
     floor: Floor
+    planes: dict[int, Floor]
     above_sole: dict[int, Float[np.ndarray, "4"]]
     contact: dict[int, Bool[np.ndarray, "T 4"]]
 
     def clip_ground(self, person: int) -> ClipGround:
-        """What the clip fit of ``person`` stands on (`jaxmocap.integrate.clip.ClipGround`)."""
-        return ClipGround(self.floor.array.astype(np.float32), self.above_sole[person].astype(np.float32),
+        """What the clip fit of ``person`` stands on (`jaxmocap.integrate.clip.ClipGround`): their plane."""
+        return ClipGround(self.planes[person].array.astype(np.float32), self.above_sole[person].astype(np.float32),
                           self.contact[person].astype(np.float32), np.float32(1.0))
+
+    def scale(self, person: int) -> float:
+        """How far ``person``'s fit is scaled about the camera to stand on the scene's floor (1 for the main
+        person): their plane's distance from the camera to the floor's."""
+        plane = self.planes[person].offset
+        return self.floor.offset / plane if self.floor.offset * plane > 0 else 1.0
 
 
 def standing(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]], fps: float,
-             scene_up=None, scene_from_camera: Float[np.ndarray, "T 3"] | None = None) -> Standing | None:
+             main: int, scene_up=None, scene_from_camera: Float[np.ndarray, "T 3"] | None = None) -> Standing | None:
     """The floor under everyone of a clip (the scene's frame) and their feet's contacts with it, from their bodies
     in the camera's frame and where they are valid (``people``: by identity), each frame's camera turned into the
-    scene's axes by ``scene_from_camera`` (None: a static camera); None without a valid frame. ``scene_up(near)``:
-    the scene's vertical near the torsos' up (`jaxmocap.detect.verticals`; the scene's axes), or None: where it
-    gives one, it is the floor's normal (its edges hold it to a fraction of a degree; a monocular fit's resting
-    feet, to several)."""
+    scene's axes by ``scene_from_camera`` (None: a static camera); None without a valid frame. Each person's fit
+    stands on a plane of its own, parallel to the others (`floor_planes`); the scene's floor is ``main``'s (the
+    first person seen where ``main`` is not). ``scene_up(near)``: the scene's vertical near the torsos' up
+    (`jaxmocap.detect.verticals`; the scene's axes), or None: where it gives one, it is the floor's normal (its
+    edges hold it to a fraction of a degree; a monocular fit's resting feet, to several)."""
     valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
     seen = [i for i in people if valid[i].any()]
     if not seen:
@@ -225,11 +260,15 @@ def standing(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLX
              for i, (params, _) in people.items()}
     up = torso_up(np.concatenate([joints[i] for i in seen]), np.concatenate([valid[i] for i in seen]))
     vertical = None if scene_up is None else scene_up(up)
-    floor = floor_plane(np.concatenate([feet[i][valid[i]].reshape(-1, 3) for i in seen]),
-                        np.concatenate([np.tile(above[i], int(valid[i].sum())) for i in seen]),
-                        np.concatenate([stance_weights(resting[i])[valid[i]].ravel() for i in seen]),
-                        up if vertical is None else vertical, known_up=vertical is not None)
-    return Standing(floor, above, {i: contacts(feet[i], above[i], resting[i], floor) for i in people})
+    planes = floor_planes(np.concatenate([feet[i][valid[i]].reshape(-1, 3) for i in seen]),
+                          np.concatenate([np.tile(above[i], int(valid[i].sum())) for i in seen]),
+                          np.concatenate([stance_weights(resting[i])[valid[i]].ravel() for i in seen]),
+                          np.concatenate([np.full(4 * int(valid[i].sum()), k) for k, i in enumerate(seen)]),
+                          up if vertical is None else vertical, known_up=vertical is not None)
+    planes = dict(zip(seen, planes))
+    planes |= {i: planes[seen[0]] for i in people if i not in planes}
+    return Standing(planes[main if main in seen else seen[0]], planes, above,
+                    {i: contacts(feet[i], above[i], resting[i], planes[i]) for i in people})
 
 
 def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]],
@@ -248,8 +287,9 @@ def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.S
                       np.asarray(scene_from_camera)[start:start + 1])[0]
     camera_from_world = cameras_from_world(world_frame(ground.floor, origin), len(valid[first]), scene_from_camera)
     out = {}
-    for i, (params, _) in people.items():
-        orient, transl = world_pose(params.global_orient, params.transl, pelvis[i], camera_from_world)
+    for i, (params, _) in people.items():  # each moved about the camera onto the floor (`Standing.scale`)
+        moved = (ground.scale(i) - 1.0) * np.asarray(pelvis[i])
+        orient, transl = world_pose(params.global_orient, params.transl + moved, pelvis[i] + moved, camera_from_world)
         out[i] = {"world_global_orient": orient.astype(np.float32), "world_transl": transl.astype(np.float32),
                   "camera_from_world": camera_from_world.astype(np.float32),
                   "floor": ground.floor.array.astype(np.float32), "contact": ground.contact[i]}

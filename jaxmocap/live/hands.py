@@ -17,7 +17,6 @@ from jaxtyping import Array, Bool, Float
 
 import smplx_jax
 from jaxmocap.compile_cache import disk_jit
-from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.hand_tracker import Hand, HandTracker
 from jaxmocap.hand_motion import hand_meshes
 from jaxmocap.integrate.clip import ClipConfig
@@ -209,8 +208,7 @@ class HandSession(Session):
         self.lens = (None, None)  # each hand has its weak-perspective camera
         self.hand_models = {side: smplx_jax.hand_model(self.model, side) for side in SIDES}
         self.solver = HandSolver(self.model, lens_of(self.source.size, config.focal_length))
-        self.detector = HandTracker(static_image_mode=False, max_hands=config.max_hands,
-                                    redetect_every=search_interval(self.source.fps))
+        self.detector = HandTracker(static_image_mode=False, max_hands=config.max_hands)
         self.recorder = None if config.record is None else HandRecorder(config.record, model_sha256,
                                                                          self.source.fps, self.source.size)
 

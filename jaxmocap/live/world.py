@@ -24,6 +24,7 @@ from jaxmocap.integrate.ground import (
     Floor,
     at_rest,
     contacts,
+    main_person,
     rest_pelvis,
     sole_heights,
     standing,
@@ -134,9 +135,9 @@ class LiveWorld:
             params = jax.tree.map(lambda *a: np.stack([np.asarray(x, np.float32) for x in a]),
                                   *(absent if s is None else s.params for s in rows))
             people[person] = (params, np.asarray([s is not None for s in rows]))
-        ground = standing(self.model, people, fps, lambda near: images_vertical(
+        main = main_person({i: valid for i, (_, valid) in people.items()})
+        ground = standing(self.model, people, fps, main, lambda near: images_vertical(
             [image for _, image in images], self.lens, near, self.long_side, self.fixed))
-        main = max(people, key=lambda i: (people[i][1].sum(), -i))
         params, valid = people[main]
         first = int(np.argmax(valid))
         self.floor = ground.floor

@@ -20,7 +20,6 @@ from jaxtyping import ArrayLike, Float
 
 import smplx_jax
 from jaxmocap.compile_cache import disk_jit
-from jaxmocap.detect.detector import search_interval
 from jaxmocap.detect.hand_json import hands_openpose
 from jaxmocap.detect.hand_tracker import HandTracker
 from jaxmocap.detect.openpose import json_name, write_openpose_json
@@ -40,7 +39,7 @@ from jaxmocap.result_files import file_sha256
 from smplx_jax import SIDES
 from smplx_jax.atomic_files import atomic_path
 
-SETTINGS_VERSION = 1  # of the stored chunks
+SETTINGS_VERSION = 2  # of the stored chunks
 
 # One row per hand seen in a frame: (column, shape after the row axis)
 COLUMNS = {"frame": (), "hand_id": (), "side": (), "keypoints_2d": (21, 3), "world": (21, 3), "score": (),
@@ -86,8 +85,7 @@ def run_hands(config: RunConfig, out_dir) -> RunReport:
         regression = Regression.load(config.weights, model)
     media, frames = open_media(config.source, config.start, config.end, config.stride)
     still = media.kind in ("image", "images")
-    tracker = HandTracker(static_image_mode=still, max_hands=config.max_hands,
-                          redetect_every=search_interval(media.fps))
+    tracker = HandTracker(static_image_mode=still, max_hands=config.max_hands)
     store = ChunkStore(out_dir, chunk_key(config, model_sha256) | {"version": SETTINGS_VERSION}, HandChunk)
     clock = StageClock()
     solve = functools.partial(solve_hand_chunk, tracker, model, {s: hand_keypoint_model(model, s) for s in SIDES},

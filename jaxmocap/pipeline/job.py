@@ -28,7 +28,7 @@ from jaxmocap.detect.identities import IdentityTracker
 from jaxmocap.detect.models import available_landmarks
 from jaxmocap.detect.verticals import AGREE_RAD, images_vertical
 from jaxmocap.frame_source import Media, open_media, sample_frames
-from jaxmocap.integrate.ground import standing, world_arrays
+from jaxmocap.integrate.ground import main_person, standing, world_arrays
 from jaxmocap.motion import write_motion
 from jaxmocap.pipeline.chunks import ChunkStore, stored_or_solved
 from jaxmocap.pipeline.config import RunConfig, chunk_key
@@ -115,10 +115,10 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
             return median_shape(track.bodies)  # as regressed
 
         tracks = {i: dataclasses.replace(t, bodies=person_bodies(t)) for i, t in tracks.items()}
-    ground = None
+    ground, main = None, main_person({i: t.bodies.valid for i, t in tracks.items()})
     if video and inputs.lens[0] is not None:  # the scene's floor, everyone on it
         with clock("ground"):
-            ground = standing(inputs.model, _people(tracks), inputs.media.fps,
+            ground = standing(inputs.model, _people(tracks), inputs.media.fps, main,
                               functools.partial(_scene_up, config, inputs, chunks), turns)
             if ground and fit and rate:  # the clip fit refitted standing on it
                 tracks = {i: dataclasses.replace(t, bodies=fitted_track(inputs.model, t, inputs.lens, rate,
@@ -130,7 +130,6 @@ def run_bodies(config: RunConfig, out_dir, observed: Observer | None = None) -> 
                 "model_sha256": np.asarray(inputs.model_sha256), "landmark_model": np.asarray(inputs.landmarks)}
         motions = {i: motion_arrays(inputs.model, t.bodies, t.keypoints_2d, inputs.lens) | meta
                    for i, t in tracks.items()}
-        main = main_person(motions)
         if ground:  # the scene's world frame, on the floor
             world = world_arrays(inputs.model, _people(tracks), main, ground, turns)
             motions = {i: m | world[i] for i, m in motions.items()}
@@ -179,11 +178,6 @@ def _clip_fitted(config: RunConfig, inputs: Inputs) -> bool:
     """Whether the run's motion is the clip fit (`fitted_track`): the embedded default, and the regressors' bodies
     with ``--integration optimize``; copy-and-paste and EFT keep the regressors' bodies as they are."""
     return inputs.regression is None or config.integration == "optimize"
-
-
-def main_person(motions: dict[int, dict]) -> int | None:
-    """The person valid in most frames (the first seen of those tied); None without anyone."""
-    return max(motions, key=lambda i: (int(motions[i]["valid"].sum()), -i), default=None)
 
 
 def whole_tracks(chunks: list[Chunk], model: smplx_jax.BodyModel) -> dict[int, Track]:

@@ -12,7 +12,9 @@ legacy solution runs them too (``model_complexity=2`` and ``0``) instead of tryi
 Writes ``tests/data/mediapipe_golden.json``: per image, the pose landmarks (33 × x, y in pixels, z, visibility) of
 ``mp.solutions.pose.Pose(static_image_mode=True, model_complexity=c)`` for each landmark model (``pose``: full,
 ``pose_heavy``, ``pose_lite``) and the hands (21 × x, y in pixels, z, with mediapipe's handedness label and score)
-of ``mp.solutions.hands.Hands(static_image_mode=True)``.
+of ``mp.solutions.hands.Hands(static_image_mode=True)``; per hand video (`VIDEOS`) and each of its versions
+(`versions`: as shot, blurred, mirrored and blurred), the hands found in each frame by
+``mp.solutions.hands.Hands(static_image_mode=False, max_num_hands=2)`` and the sha256 of the frames given it.
 """
 
 import hashlib
@@ -26,6 +28,22 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 POSES = {"pose": 1, "pose_heavy": 2, "pose_lite": 0}  # golden key -> model_complexity
 IMAGES = (["messi5.jpg"] + [f"pose2sim_cam01_f{i:03d}.jpg" for i in (0, 20, 40, 60, 80, 99)]
           + ["pose2sim_multi_f050.jpg"])
+VIDEOS = ["pose2sim_hand_closeup.mp4"]
+BLUR_PX = 2.0  # Gaussian sigma of the blurred versions: a hand a little out of focus or moving
+
+
+def versions(frames: list) -> dict[str, list]:
+    """A video's BGR frames as shot, blurred by `BLUR_PX`, and mirrored (a left hand for a right) and blurred."""
+    blurred = [cv2.GaussianBlur(f, (0, 0), BLUR_PX) for f in frames]
+    return {"as shot": frames, "blurred": blurred,
+            "mirrored, blurred": [cv2.GaussianBlur(cv2.flip(f, 1), (0, 0), BLUR_PX) for f in frames]}
+
+
+def read_video(path: str) -> list:
+    capture, frames = cv2.VideoCapture(path), []
+    while (frame := capture.read()[1]) is not None:
+        frames.append(frame)
+    return frames
 
 
 def main() -> None:
@@ -51,6 +69,16 @@ def main() -> None:
             print(name, *(key if entry[key] else f"no {key}" for key in POSES), len(entry["hands"]), "hands")
     for pose in poses.values():
         pose.close()
+    out["videos"] = {}
+    for name in VIDEOS:
+        out["videos"][name] = {}
+        for version, frames in versions(read_video(os.path.join(HERE, name))).items():
+            digest = hashlib.sha256(b"".join(f.tobytes() for f in frames)).hexdigest()
+            with mp.solutions.hands.Hands(static_image_mode=False, max_num_hands=2, model_complexity=1) as hands:
+                found = [len(hands.process(cv2.cvtColor(f, cv2.COLOR_BGR2RGB)).multi_hand_landmarks or [])
+                         for f in frames]
+            out["videos"][name][version] = {"pixels_sha256": digest, "hands_per_frame": found}
+            print(name, version, sum(n > 0 for n in found), "of", len(found), "frames with a hand")
     with open(os.path.join(HERE, "mediapipe_golden.json"), "w") as f:
         json.dump(out, f, indent=1)
 
