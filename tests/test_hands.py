@@ -167,8 +167,9 @@ def test_close_up_video_is_tracked_and_fitted_within_3_percent(video):
 def test_a_hand_is_found_in_every_frame_where_mediapipe_finds_one(version):
     """The hand close-up video as shot, blurred by 2 px and mirrored (a left hand) and blurred, tracked as a hands
     run tracks it (up to two hands): a hand in every frame where mediapipe's hand solution, given the same frames,
-    finds one (`tests/data/record_mediapipe_golden.py`). Blurred, the hand is lost for a frame in 17 and 21 and the
-    palm detector finds it again at once, as mediapipe's does."""
+    finds one (`tests/data/record_mediapipe_golden.py`), and never two: where mediapipe reports a second hand laid
+    over the first (as shot, 62-66: a palm detection on its fingers), it is reported once. Blurred, the hand is
+    lost for a frame in 17 and 21, found again at once by the palm detector or the second track, as mediapipe's."""
     golden = json.loads((DATA / "mediapipe_golden.json").read_text())["videos"][CLIP.name][version]
     capture, frames = cv2.VideoCapture(str(CLIP)), []
     while (frame := capture.read()[1]) is not None:
@@ -178,9 +179,9 @@ def test_a_hand_is_found_in_every_frame_where_mediapipe_finds_one(version):
               else f for f in frames]
     assert hashlib.sha256(b"".join(f.tobytes() for f in frames)).hexdigest() == golden["pixels_sha256"]
     tracker = HandTracker(static_image_mode=False, max_hands=2)
-    found = np.array([len(tracker(frame)) > 0 for frame in frames])
+    found = np.array([len(tracker(frame)) for frame in frames])
     theirs = np.array(golden["hands_per_frame"]) > 0
-    assert np.flatnonzero(theirs & ~found).tolist() == []
+    assert np.flatnonzero(theirs & (found == 0)).tolist() == [] and found.max() == 1
 
 
 def test_a_hands_run_lets_a_chunks_frames_go_before_the_next_are_read(tmp_path, monkeypatch):

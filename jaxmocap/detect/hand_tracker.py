@@ -18,6 +18,13 @@ from .models import ensure_models
 from .pose import rect_iou
 from .track_state import result_of, results_state
 
+# two hands whose corresponding landmarks lie this close on average, in the larger one's palm lengths (wrist to middle
+# knuckle), are one hand seen twice (a palm detection on its fingers gives a second, smaller hand laid over them;
+# both are tracked, as mediapipe tracks them, and the hand is reported once): a hand's landmarks stray by some
+# hundredths of a palm from frame to frame, and two hands, however they touch or clasp, hold their wrists and
+# fingers apart; only palms pressed together face-on look the same
+SAME_HAND = 0.5
+
 
 @dataclass(frozen=True)
 class Hand:
@@ -63,7 +70,7 @@ class HandTracker:
     A hand found again within ``remember`` frames of losing it, near where it was (its centre within its size),
     takes up its identity and handedness. A hand's side is its handedness averaged over the frames it is tracked;
     of two hands taken for the same side, the one less likely so gets the other (two hands in view are mostly one
-    person's pair).
+    person's pair). Two tracks on one hand (`SAME_HAND`) are reported as one, the one tracked longest.
     """
 
     def __init__(self, static_image_mode: bool = True, max_hands: int = 2, model_dir=None, num_threads: int = 2,
@@ -126,6 +133,7 @@ class HandTracker:
     def _tracked(self, image: np.ndarray) -> list[_Track]:
         if self.static_image_mode:
             return [_Track(k, h, h.right_score, 1) for k, h in enumerate(self._found(image, [], refine=True))]
+        size = (image.shape[1], image.shape[0])
         tracks, lost = [], [t for t in self._lost if self._frame - t.last_seen <= self.remember]
         for track in self._tracks:
             hand = self._hands.landmarks(image, track.result.next_roi, self.min_tracking_confidence)
@@ -136,7 +144,7 @@ class HandTracker:
                                  self._frame))
         if len(tracks) < self.max_hands:
             for hand in self._found(image, [t.result for t in tracks], refine=False):
-                before = _nearest(lost, hand, (image.shape[1], image.shape[0]))
+                before = _nearest(lost, hand, size)
                 if before is None:
                     tracks.append(_Track(self._next_id, hand, hand.right_score, 1, self._frame))
                     self._next_id += 1
@@ -154,6 +162,12 @@ class HandTracker:
         if not self.static_image_mode:
             self._tracks = tracks
             self._frame += 1
+        size = (image.shape[1], image.shape[0])
+        shown = []  # each hand once: of tracks on one hand (`SAME_HAND`), the one tracked longest
+        for track in sorted(tracks, key=lambda t: (-t.frames, t.hand_id)):
+            if not any(hand_gap(track.result, other.result, size) < SAME_HAND for other in shown):
+                shown.append(track)
+        tracks = sorted(shown, key=lambda t: t.hand_id)
         sides = [SIDES[t.right_mean > 0.5] for t in tracks]
         if len(tracks) == 2 and sides[0] == sides[1]:
             more_right = int(tracks[1].right_mean > tracks[0].right_mean)
@@ -167,6 +181,13 @@ class HandTracker:
             hands.append(Hand(track.hand_id, side, pixels, track.result.world, track.result.presence,
                               track.result.right_score, box))
         return sorted(hands, key=lambda hand: hand.hand_id)
+
+
+def hand_gap(a: HandResult, b: HandResult, image_size: tuple[int, int]) -> float:
+    """The mean distance of two hands' corresponding landmarks, in the larger one's palm lengths."""
+    pa, pb = a.landmarks[:, :2] * image_size, b.landmarks[:, :2] * image_size
+    palm = max(np.linalg.norm(pa[9] - pa[0]), np.linalg.norm(pb[9] - pb[0]), 1e-9)
+    return float(np.linalg.norm(pa - pb, axis=1).mean() / palm)
 
 
 def _nearest(lost: list[_Track], hand: HandResult, image_size: tuple[int, int]) -> _Track | None:
