@@ -91,6 +91,32 @@ def test_the_floor_and_the_world_frame_of_a_body_stepping_on_it(model, pitch, ro
     assert abs(first_pelvis[0]) < 1e-3 and abs(first_pelvis[2]) < 1e-3  # the origin under the first pelvis
 
 
+def test_a_bystander_seen_at_another_scale_stands_on_their_own_plane(model):
+    """A second person standing still through the whole clip (more resting frames than the main person's), their
+    fit 8% too far along the rays (a monocular fit's scale: their stature unknown): the scene's floor stays the
+    main person's, each keeps their contacts on their own plane (parallel: one normal), and in the world the
+    bystander is lowered from theirs onto the floor, their resting soles at y = 0."""
+    rotation, t = _camera_from_world(25.0, 8.0)
+    params, still = stepping(model, rotation, t)
+    other, _ = stepping(model, rotation, t, seed=1)
+    other = jax.tree.map(lambda a: np.repeat(a[:1], len(still), 0), other)  # standing at one place throughout
+    pelvis = body_joints(model, other)[:, 0]
+    other = dataclasses.replace(other, transl=(other.transl + 0.08 * pelvis).astype(np.float32))
+    valid = np.ones(len(still), bool)
+    people = {0: (params, valid), 1: (other, valid)}
+    standing = ground.standing(model, people, FPS, 0)
+    alone = ground.standing(model, {0: people[0]}, FPS, 0)
+    assert abs(standing.floor.offset - alone.floor.offset) < 0.005 and _angle_deg(standing.floor.normal,
+                                                                                  rotation[:, 1]) < 0.5
+    moved_by = float(standing.floor.normal @ (0.08 * pelvis[0]))  # the bystander's soles, moved along the normal
+    assert abs(standing.planes[1].offset - (standing.planes[0].offset - moved_by)) < 0.005 and abs(moved_by) > 0.05
+    assert standing.contact[0][still].mean() > 0.5 and standing.contact[1].mean() > 0.9
+    world = ground.world_arrays(model, people, 0, standing)[1]
+    moved = dataclasses.replace(other, global_orient=world["world_global_orient"], transl=world["world_transl"])
+    soles = body_joints(model, moved)[:, ground.FOOT_JOINTS, 1] - ground.sole_heights(model, np.zeros(10))
+    assert np.abs(soles[world["contact"]]).max() < 0.01
+
+
 def test_heels_and_toes_stand_above_the_rest_meshs_soles(model):
     """`ground.sole_heights` from the shaped template: the rest pose's mesh (`smplx_jax.forward`) gives the same."""
     betas = np.random.default_rng(0).normal(size=model.num_betas).astype(np.float32)

@@ -11,7 +11,7 @@ joint stands its own height above its sole, `sole_heights`), its normal drawn to
 (people stand and walk upright), which decides it where the resting feet span too little of the floor to tilt a
 plane; a monocular fit's feet tilt it by tens of degrees where a person stays in one place. The floor's height is
 the resting soles' either way, each person's fit at its own (their scale, which one view cannot see, moves it), the
-scene's the main person's; the others are moved about the camera onto it in the world. The world frame
+scene's the main person's; the others are lowered or raised onto it in the world. The world frame
 (`world_frame`): y up along the floor's normal, the floor (the soles' plane) y = 0, z the scene's forward direction
 along the floor, the origin on the floor under the main person's pelvis in their first valid frame. `standing` finds
 the floor and the feet's contacts of a clip's motion (the clip fit is then refitted on them: `ClipGround`),
@@ -233,20 +233,20 @@ class Standing(NamedTuple):
         return ClipGround(self.planes[person].array.astype(np.float32), self.above_sole[person].astype(np.float32),
                           self.contact[person].astype(np.float32), np.float32(1.0))
 
-    def scale(self, person: int) -> float:
-        """How far ``person``'s fit is scaled about the camera to stand on the scene's floor (1 for the main
-        person): their plane's distance from the camera to the floor's."""
-        plane = self.planes[person].offset
-        return self.floor.offset / plane if self.floor.offset * plane > 0 else 1.0
+    def raised(self, person: int) -> float:
+        """How far ``person``'s plane lies above the scene's floor (metres; 0 for the main person): the world keys
+        lower them by it, onto the floor."""
+        return self.floor.offset - self.planes[person].offset
 
 
 def standing(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.SMPLXParams, np.ndarray]], fps: float,
-             main: int, scene_up=None, scene_from_camera: Float[np.ndarray, "T 3"] | None = None) -> Standing | None:
+             main: int | None, scene_up=None, scene_from_camera: Float[np.ndarray, "T 3"] | None = None
+             ) -> Standing | None:
     """The floor under everyone of a clip (the scene's frame) and their feet's contacts with it, from their bodies
     in the camera's frame and where they are valid (``people``: by identity), each frame's camera turned into the
     scene's axes by ``scene_from_camera`` (None: a static camera); None without a valid frame. Each person's fit
     stands on a plane of its own, parallel to the others (`floor_planes`); the scene's floor is ``main``'s (the
-    first person seen where ``main`` is not). ``scene_up(near)``: the scene's vertical near the torsos' up
+    first person seen where ``main`` is None or not seen). ``scene_up(near)``: the scene's vertical near the torsos' up
     (`jaxmocap.detect.verticals`; the scene's axes), or None: where it gives one, it is the floor's normal (its
     edges hold it to a fraction of a degree; a monocular fit's resting feet, to several)."""
     valid = {i: np.asarray(v, bool) for i, (_, v) in people.items()}
@@ -287,9 +287,9 @@ def world_arrays(model: smplx_jax.BodyModel, people: dict[int, tuple[smplx_jax.S
                       np.asarray(scene_from_camera)[start:start + 1])[0]
     camera_from_world = cameras_from_world(world_frame(ground.floor, origin), len(valid[first]), scene_from_camera)
     out = {}
-    for i, (params, _) in people.items():  # each moved about the camera onto the floor (`Standing.scale`)
-        moved = (ground.scale(i) - 1.0) * np.asarray(pelvis[i])
-        orient, transl = world_pose(params.global_orient, params.transl + moved, pelvis[i] + moved, camera_from_world)
+    for i, (params, _) in people.items():
+        orient, transl = world_pose(params.global_orient, params.transl, pelvis[i], camera_from_world)
+        transl[:, 1] -= ground.raised(i)  # each on the floor from their own plane (`Standing.raised`)
         out[i] = {"world_global_orient": orient.astype(np.float32), "world_transl": transl.astype(np.float32),
                   "camera_from_world": camera_from_world.astype(np.float32),
                   "floor": ground.floor.array.astype(np.float32), "contact": ground.contact[i]}
